@@ -1,0 +1,238 @@
+"""The H-microdirectional material point: state, pure batched update, consistent tangents.
+
+Conventions (spec/hmodel.md): SI units, compression positive, 2x2 tensors with the tensor axes
+first and any batch axes last, e.g. a strain increment of shape (2, 2, *batch), a tangent of shape
+(2, 2, 2, 2, *batch). Hexagon fields are stored per material point as rows of n_dir orientations:
+shape (*batch, n_dir), so that one point's hexagons are contiguous in memory for the kernel.
+
+One contract (FElupe style)::
+
+    stress, tangent, new_state = update(state, d_eps, params)
+
+It never modifies ``state``. ``update_full`` returns the same plus what the directional analysis
+of second-order work needs (Lagrangian tangent and increment, transport term T3, micro sums).
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from . import _kernels
+from .params import HParams
+
+__all__ = [
+    "HState", "Increment", "reference_state", "update", "update_full", "broadcast_state",
+    "to_voigt", "from_voigt", "tangent_from_voigt", "take_points",
+]
+
+# Above this many points the parallel kernel pays for its thread start-up.
+PARALLEL_MIN_POINTS = 64
+
+
+class HState(NamedTuple):
+    """State of a batch of H-model material points (immutable record).
+
+    Hexagon fields, shape (*batch, n_dir): d1, d2 [m] branch lengths, alpha [rad] opening angle,
+    N1, T1, N2 [N] contact forces, l1, l2 [m] hexagon lengths along n and t (Eqs. 17-19).
+    eps : (2, 2, *batch) total strain since the zero-force reference (for the volume).
+    stress : (2, 2, *batch) Cauchy stress [Pa], compression positive.
+    V0 : (*batch,) reference volume [m^3] of the average hexagon, h sum_i omega_i l1_i l2_i.
+    sliding, is_open : (*batch, n_dir) bool, the pattern of the step that produced this state.
+    """
+
+    d1: np.ndarray
+    d2: np.ndarray
+    alpha: np.ndarray
+    N1: np.ndarray
+    T1: np.ndarray
+    N2: np.ndarray
+    l1: np.ndarray
+    l2: np.ndarray
+    eps: np.ndarray
+    stress: np.ndarray
+    V0: np.ndarray
+    sliding: np.ndarray
+    is_open: np.ndarray
+
+    @property
+    def batch_shape(self) -> tuple:
+        return self.V0.shape
+
+    @property
+    def n_dir(self) -> int:
+        return self.d1.shape[-1]
+
+    @property
+    def volume(self) -> np.ndarray:
+        """Current volume V = V0 det(I - eps) [m^3], shape (*batch,)."""
+        e = self.eps
+        return self.V0 * ((1.0 - e[0, 0]) * (1.0 - e[1, 1]) - e[0, 1] * e[1, 0])
+
+
+class Increment(NamedTuple):
+    """Everything one update returns; tensors have the tensor axes first.
+
+    stress : (2, 2, *batch) Cauchy stress at the end of the increment [Pa].
+    tangent : (2, 2, 2, 2, *batch) d stress / d d_eps, exact for the returned stress [Pa].
+    state : the new HState.
+    tangent_lagrangian : (2, 2, 2, 2, *batch) d(dPi)/d d_eps [Pa].
+    dPi : (2, 2, *batch) Lagrangian (first Piola-Kirchhoff) increment T1 (Eq. 32) [Pa].
+    T3 : (2, 2, *batch) transport term, geometry change at fixed forces (Eq. 28) [Pa].
+    w2_micro_hex : (*batch,) sum_i omega_i w2_i (Eq. 36, compression-positive lengths) [J].
+    w2n, w2t : (*batch,) normal / tangential contact parts of the micro sum [J].
+    """
+
+    stress: np.ndarray
+    tangent: np.ndarray
+    state: HState
+    tangent_lagrangian: np.ndarray
+    dPi: np.ndarray
+    T3: np.ndarray
+    w2_micro_hex: np.ndarray
+    w2n: np.ndarray
+    w2t: np.ndarray
+
+
+# -- tensor helpers (tensor axes first, batch last) ------------------------------------------
+def to_voigt(t: np.ndarray) -> np.ndarray:
+    """(2, 2, *batch) symmetric tensor -> (npts, 3) rows (11, 22, 12); the 12 entry is the
+    symmetric part (t12 + t21) / 2."""
+    t = np.asarray(t, dtype=float)
+    if t.shape[:2] != (2, 2):
+        raise ValueError(f"expected a tensor of shape (2, 2, *batch), got {t.shape}")
+    out = np.empty((int(np.prod(t.shape[2:], dtype=int)), 3))
+    out[:, 0] = t[0, 0].ravel()
+    out[:, 1] = t[1, 1].ravel()
+    out[:, 2] = 0.5 * (t[0, 1] + t[1, 0]).ravel()
+    return out
+
+
+def from_voigt(v: np.ndarray, batch_shape: tuple) -> np.ndarray:
+    """(npts, 3) rows (11, 22, 12) -> (2, 2, *batch) symmetric tensor."""
+    v = np.asarray(v)
+    t = np.empty((2, 2) + tuple(batch_shape))
+    t[0, 0] = v[:, 0].reshape(batch_shape)
+    t[1, 1] = v[:, 1].reshape(batch_shape)
+    t[0, 1] = t[1, 0] = v[:, 2].reshape(batch_shape)
+    return t
+
+
+_VOIGT = ((0, 0), (1, 1), (0, 1))
+
+
+def tangent_from_voigt(T: np.ndarray, batch_shape: tuple) -> np.ndarray:
+    """(npts, 3, 3) d sigma_a / d v_b with v = (e11, e22, e12) -> (2, 2, 2, 2, *batch) with
+    C[i, j, k, l] = d sigma_ij / d eps_kl for a general (non-symmetric) increment, whose
+    symmetric part is what the material sees: C has both minor symmetries."""
+    C = np.empty((2, 2, 2, 2) + tuple(batch_shape))
+    for a, (i, j) in enumerate(_VOIGT):
+        for b, (k, l) in enumerate(_VOIGT):
+            val = T[:, a, b].reshape(batch_shape)
+            if b == 2:
+                val = 0.5 * val
+            for (ii, jj) in {(i, j), (j, i)}:
+                for (kk, ll) in {(k, l), (l, k)}:
+                    C[ii, jj, kk, ll] = val
+    return C
+
+
+# -- states ------------------------------------------------------------------------------------
+def reference_state(params: HParams, batch_shape: tuple = ()) -> HState:
+    """The zero-force reference: every hexagon with d1 = d2 = 2 r_g, alpha = alpha0."""
+    batch_shape = tuple(batch_shape)
+    shape = batch_shape + (params.n_dir,)
+    r = params.r_g
+    a0 = np.radians(params.alpha0)
+    full = lambda v: np.full(shape, float(v))
+    l1 = 2.0 * r + 4.0 * r * np.cos(a0)
+    l2 = 4.0 * r * np.sin(a0)
+    V0 = params.h * float(np.sum(params.omega)) * l1 * l2
+    return HState(
+        d1=full(2 * r), d2=full(2 * r), alpha=full(a0), N1=full(0), T1=full(0), N2=full(0),
+        l1=full(l1), l2=full(l2), eps=np.zeros((2, 2) + batch_shape),
+        stress=np.zeros((2, 2) + batch_shape), V0=np.full(batch_shape, V0),
+        sliding=np.zeros(shape, dtype=bool), is_open=np.zeros(shape, dtype=bool))
+
+
+def broadcast_state(state: HState, batch_shape: tuple) -> HState:
+    """Copies of a single-point state (batch ()) for every point of ``batch_shape``."""
+    if state.batch_shape != ():
+        raise ValueError(f"broadcast_state needs a single-point state, got batch {state.batch_shape}")
+    batch_shape = tuple(batch_shape)
+    hexf = lambda a: np.ascontiguousarray(np.broadcast_to(a, batch_shape + a.shape))
+    tens = lambda a: np.ascontiguousarray(np.broadcast_to(a.reshape(2, 2, *([1] * len(batch_shape))),
+                                                          (2, 2) + batch_shape))
+    return HState(*(hexf(getattr(state, f)) for f in HState._fields[:8]),
+                  eps=tens(state.eps), stress=tens(state.stress),
+                  V0=np.full(batch_shape, float(state.V0)),
+                  sliding=hexf(state.sliding), is_open=hexf(state.is_open))
+
+
+def take_points(state: HState, index) -> HState:
+    """The sub-batch ``index`` (an index along the flattened batch) of a state."""
+    n = state.n_dir
+    idx = np.asarray(index)
+    hexf = lambda a: a.reshape(-1, n)[idx]
+    tens = lambda a: a.reshape(2, 2, -1)[:, :, idx]
+    return HState(*(hexf(getattr(state, f)) for f in HState._fields[:8]),
+                  eps=tens(state.eps), stress=tens(state.stress), V0=state.V0.reshape(-1)[idx],
+                  sliding=hexf(state.sliding), is_open=hexf(state.is_open))
+
+
+# -- the update --------------------------------------------------------------------------------
+def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = True,
+                parallel: bool | None = None) -> Increment:
+    """Advance every point by the strain increment ``d_eps`` (2, 2, *batch), compression positive.
+
+    Only the symmetric part of ``d_eps`` acts (Eq. 16 sees n.de.n and t.de.t). The sliding /
+    opening pattern is decided by this increment from ``state`` (return rule of spec/hmodel.md).
+    ``allow_sliding=False`` gives the purely elastic response (the Coulomb cap off).
+    """
+    d_eps = np.asarray(d_eps, dtype=float)
+    batch = state.batch_shape
+    if d_eps.shape != (2, 2) + batch:
+        raise ValueError(f"d_eps must have shape (2, 2) + batch = {(2, 2) + batch}, got {d_eps.shape}")
+    if not np.all(np.isfinite(d_eps)):
+        raise ValueError("d_eps contains non-finite values (nan or inf)")
+    n = state.n_dir
+    if n != params.n_dir:
+        raise ValueError(f"state has n_dir = {n} orientations but params.n_dir = {params.n_dir}")
+    npts = int(np.prod(batch, dtype=int))
+    hexf = lambda a: np.ascontiguousarray(a, dtype=float).reshape(npts, n)
+    de = to_voigt(d_eps)
+    eps = to_voigt(state.eps)
+    V0 = np.ascontiguousarray(state.V0, dtype=float).reshape(npts)
+    theta = params.theta
+    out = _kernels.allocate_outputs(npts, n)
+    if parallel is None:
+        parallel = npts >= PARALLEL_MIN_POINTS
+    kern = _kernels.update_parallel if parallel else _kernels.update_serial
+    kern(*(hexf(getattr(state, f)) for f in HState._fields[:8]),
+         np.ascontiguousarray(state.is_open, dtype=np.bool_).reshape(npts, n), eps, V0, de,
+         np.cos(theta), np.sin(theta), params.omega, float(params.kn), float(params.kt),
+         float(params.mu), float(params.r_g), bool(allow_sliding), *out)
+    (nd1, nd2, nal, nN1, nT1, nN2, nl1, nl2, slid, opn, sig, tan, tanL, dPi, T3, w2, w2n, w2t) = out
+    hshape = batch + (n,)
+    stress = from_voigt(sig, batch)
+    new_state = HState(
+        d1=nd1.reshape(hshape), d2=nd2.reshape(hshape), alpha=nal.reshape(hshape),
+        N1=nN1.reshape(hshape), T1=nT1.reshape(hshape), N2=nN2.reshape(hshape),
+        l1=nl1.reshape(hshape), l2=nl2.reshape(hshape),
+        eps=from_voigt(eps + de, batch), stress=stress, V0=V0.reshape(batch).copy(),
+        sliding=slid.reshape(hshape), is_open=opn.reshape(hshape))
+    return Increment(
+        stress=stress, tangent=tangent_from_voigt(tan, batch), state=new_state,
+        tangent_lagrangian=tangent_from_voigt(tanL, batch), dPi=from_voigt(dPi, batch),
+        T3=from_voigt(T3, batch), w2_micro_hex=w2.reshape(batch), w2n=w2n.reshape(batch),
+        w2t=w2t.reshape(batch))
+
+
+def update(state: HState, d_eps, params: HParams):
+    """The material contract: ``(stress, tangent, new_state) = update(state, d_eps, params)``.
+
+    stress (2, 2, *batch) [Pa], tangent (2, 2, 2, 2, *batch) [Pa], both compression positive;
+    ``state`` is left unchanged.
+    """
+    inc = update_full(state, d_eps, params)
+    return inc.stress, inc.tangent, inc.state

@@ -1,0 +1,105 @@
+"""Parameters of the H-microdirectional model (Table I of Nicot, Hadda & Darve 2013)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+__all__ = ["HParams"]
+
+# Grains 2-6 touch when alpha <= 30 deg (l2 = 4 r sin alpha <= 2 r); grains 1-4 when alpha >= 90 deg.
+ALPHA0_MIN_DEG = 30.0
+ALPHA0_MAX_DEG = 90.0
+
+
+@dataclass(frozen=True)
+class HParams:
+    """Constitutive parameters, validated on construction.
+
+    Units: SI (N/m for stiffnesses, m for lengths, Pa for stress); angles in degrees.
+
+    Attributes
+    ----------
+    kn, kt : normal / tangential contact stiffness [N/m] (Table I: 1e6, 0.5e6).
+    phi_g : contact friction angle [deg], in (0, 90) (Table I: 20).
+    r_g : grain radius [m] (Table I: 1e-3).
+    alpha0 : initial opening angle of every hexagon [deg], in (30, 90) (Table I: 42.8).
+    p0 : isotropic confining stress of the initial state [Pa] (Table I: 200e3).
+    thickness : out-of-plane thickness h of the slab [m]; None means 2 r_g (spec/hmodel.md).
+    n_dir : number of hexagon orientations theta in [0, pi), at least 8.
+    fabric_a, fabric_b : fabric omega(theta) = (1 + a cos 2(theta - b)) / n_dir, |a| < 1, b in deg.
+    """
+
+    kn: float = 1.0e6
+    kt: float = 0.5e6
+    phi_g: float = 20.0
+    r_g: float = 1.0e-3
+    alpha0: float = 42.8
+    p0: float = 200.0e3
+    thickness: float | None = None
+    n_dir: int = 180
+    fabric_a: float = 0.0
+    fabric_b: float = 0.0
+    _h: float = field(init=False, repr=False, compare=False, default=0.0)
+
+    def __post_init__(self):
+        for f in fields(self):
+            if f.name.startswith("_"):
+                continue
+            v = getattr(self, f.name)
+            if v is None:
+                continue
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                raise ValueError(f"HParams.{f.name} must be a real number, got {v!r}") from None
+            if not math.isfinite(fv):
+                raise ValueError(f"HParams.{f.name} must be finite, got {v!r}")
+        _check(self.kn > 0, "kn", "kn > 0 [N/m]", self.kn)
+        _check(self.kt >= 0, "kt", "kt >= 0 [N/m]", self.kt)
+        _check(0.0 < self.phi_g < 90.0, "phi_g", "0 < phi_g < 90 [deg]", self.phi_g)
+        _check(self.r_g > 0, "r_g", "r_g > 0 [m]", self.r_g)
+        _check(ALPHA0_MIN_DEG < self.alpha0 < ALPHA0_MAX_DEG, "alpha0",
+               f"{ALPHA0_MIN_DEG:g} < alpha0 < {ALPHA0_MAX_DEG:g} [deg] (hexagon geometry)", self.alpha0)
+        _check(self.p0 > 0, "p0", "p0 > 0 [Pa]", self.p0)
+        if self.thickness is not None:
+            _check(self.thickness > 0, "thickness", "thickness > 0 [m] (or None for 2 r_g)", self.thickness)
+        _check(float(self.n_dir) == int(self.n_dir) and int(self.n_dir) >= 8, "n_dir",
+               "an integer n_dir >= 8", self.n_dir)
+        _check(abs(self.fabric_a) < 1.0, "fabric_a", "-1 < fabric_a < 1 (omega > 0)", self.fabric_a)
+        object.__setattr__(self, "n_dir", int(self.n_dir))
+        object.__setattr__(self, "_h", float(self.thickness) if self.thickness is not None else 2.0 * self.r_g)
+
+    # -- derived quantities -------------------------------------------------------------
+    @property
+    def h(self) -> float:
+        """Out-of-plane thickness actually used [m]."""
+        return self._h
+
+    @property
+    def mu(self) -> float:
+        """Contact friction coefficient tan(phi_g)."""
+        return math.tan(math.radians(self.phi_g))
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Hexagon orientations theta_i = i pi / n_dir [rad], shape (n_dir,)."""
+        return np.pi * np.arange(self.n_dir) / self.n_dir
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Fabric weights omega_i (sum 1), shape (n_dir,)."""
+        w = 1.0 + self.fabric_a * np.cos(2.0 * (self.theta - math.radians(self.fabric_b)))
+        return w / self.n_dir
+
+    def replace(self, **changes) -> "HParams":
+        """A copy with some fields changed (validated again)."""
+        kw = {f.name: getattr(self, f.name) for f in fields(self) if not f.name.startswith("_")}
+        kw.update(changes)
+        return HParams(**kw)
+
+
+def _check(ok, name, allowed, value):
+    if not ok:
+        raise ValueError(f"HParams.{name} = {value!r} is out of range: allowed {allowed}")

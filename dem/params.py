@@ -1,0 +1,127 @@
+"""Model parameters of the 2D DEM (Nicot, Hadda & Darve 2013, section 4).
+
+All values are SI (m, kg, s, N, Pa).  Defaults are the paper's sample:
+12,000 disks, radii uniform in [3, 14] mm, kn/D = 32 GPa (D = mean diameter),
+kt/kn = 0.42, interparticle friction 35 deg, density 2600 kg/m^3 (not given in
+the paper), out-of-plane thickness 1 m.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, asdict
+
+
+def _check(name, value, ok, allowed):
+    if not ok:
+        raise ValueError(f"{name}={value!r} is invalid; allowed range: {allowed}")
+
+
+@dataclass(frozen=True)
+class DemParams:
+    """Contact law, sample and numerical parameters (validated on construction).
+
+    Attributes (units):
+      n                      number of disks
+      r_min, r_max           radius range [m], radii uniform in [r_min, r_max]
+      density                grain density [kg/m^3]
+      thickness              out-of-plane length of the disks [m]
+      kn_over_d              normal stiffness / mean diameter [Pa]; kn = kn_over_d * (r_min + r_max)
+      kt_over_kn             tangential / normal stiffness ratio [-]
+      friction_deg           interparticle friction angle [deg], mu = tan(friction)
+      damping                Cundall non-viscous damping coefficient lambda [-]
+      normal_damping_ratio   viscous dashpot in the normal direction as a fraction of the
+                             critical damping of the two-disk system [-] (0 = none; used by tests)
+      dt_safety              dt = dt_safety * sqrt(m_min / kn) [-]
+      skin_factor            Verlet skin = skin_factor * mean diameter [-]
+      servo_gain             fraction of the force error corrected per step by the wall servo [-]
+      servo_smoothing        weight of the new wall displacement in the smoothed one [-]
+      servo_vmax             cap on the wall speed under stress control [m/s]
+      seed                   seed of the sample generator
+    """
+
+    n: int = 12000
+    r_min: float = 0.003
+    r_max: float = 0.014
+    density: float = 2600.0
+    thickness: float = 1.0
+    kn_over_d: float = 32e9
+    kt_over_kn: float = 0.42
+    friction_deg: float = 35.0
+    damping: float = 0.15
+    normal_damping_ratio: float = 0.0
+    dt_safety: float = 0.2
+    skin_factor: float = 0.1
+    servo_gain: float = 0.25
+    servo_smoothing: float = 0.5
+    servo_vmax: float = 0.5
+    seed: int = 1
+
+    def __post_init__(self):
+        _check("n", self.n, isinstance(self.n, (int,)) and self.n >= 1, "integer >= 1")
+        _check("r_min", self.r_min, self.r_min > 0 and math.isfinite(self.r_min), "r_min > 0 [m]")
+        _check("r_max", self.r_max, self.r_max >= self.r_min and math.isfinite(self.r_max),
+               f"r_max >= r_min = {self.r_min} [m]")
+        _check("density", self.density, self.density > 0 and math.isfinite(self.density),
+               "density > 0 [kg/m^3]")
+        _check("thickness", self.thickness, self.thickness > 0 and math.isfinite(self.thickness),
+               "thickness > 0 [m]")
+        _check("kn_over_d", self.kn_over_d, self.kn_over_d > 0 and math.isfinite(self.kn_over_d),
+               "kn_over_d > 0 [Pa]")
+        _check("kt_over_kn", self.kt_over_kn, 0 < self.kt_over_kn < math.inf, "kt_over_kn > 0")
+        _check("friction_deg", self.friction_deg, 0 <= self.friction_deg < 90,
+               "0 <= friction_deg < 90 [deg]")
+        _check("damping", self.damping, 0 <= self.damping < 1, "0 <= damping < 1")
+        _check("normal_damping_ratio", self.normal_damping_ratio,
+               0 <= self.normal_damping_ratio < 1, "0 <= normal_damping_ratio < 1")
+        _check("dt_safety", self.dt_safety, 0 < self.dt_safety <= 0.5, "0 < dt_safety <= 0.5")
+        _check("skin_factor", self.skin_factor, 0 < self.skin_factor <= 1, "0 < skin_factor <= 1")
+        _check("servo_gain", self.servo_gain, 0 < self.servo_gain <= 1, "0 < servo_gain <= 1")
+        _check("servo_smoothing", self.servo_smoothing, 0 < self.servo_smoothing <= 1,
+               "0 < servo_smoothing <= 1")
+        _check("servo_vmax", self.servo_vmax, self.servo_vmax > 0, "servo_vmax > 0 [m/s]")
+        _check("seed", self.seed, isinstance(self.seed, int) and self.seed >= 0, "integer >= 0")
+
+    # Derived quantities -------------------------------------------------------------
+    @property
+    def d_mean(self) -> float:
+        """Mean diameter of the radius distribution [m]."""
+        return self.r_min + self.r_max
+
+    @property
+    def kn(self) -> float:
+        """Normal contact stiffness [N/m], one value for the whole sample."""
+        return self.kn_over_d * self.d_mean
+
+    @property
+    def kt(self) -> float:
+        """Tangential contact stiffness [N/m]."""
+        return self.kt_over_kn * self.kn
+
+    @property
+    def mu(self) -> float:
+        return math.tan(math.radians(self.friction_deg))
+
+    @property
+    def skin(self) -> float:
+        return self.skin_factor * self.d_mean
+
+    def mass(self, r: float) -> float:
+        return self.density * math.pi * r * r * self.thickness
+
+    @property
+    def dt(self) -> float:
+        """Time step [s]: a safety fraction of sqrt(m_min / kn) (stiffest contact, lightest disk)."""
+        return self.dt_safety * math.sqrt(self.mass(self.r_min) / self.kn)
+
+    def replace(self, **kw) -> "DemParams":
+        d = asdict(self)
+        d.update(kw)
+        return DemParams(**d)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "DemParams":
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})

@@ -1,0 +1,238 @@
+"""Orchestration: a `Simulation` holds the arrays and calls the kernels.
+
+`State` is an immutable snapshot (copies) of everything needed to continue a run
+bit-for-bit: particles, walls, servo memory, the pair list with tangential history,
+the neighbour-list reference positions, the step counter and the control.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from . import kernels
+from .neighbours import build_pair_list, finish_pair_list
+from .params import DemParams
+from .walls import Control, wall_stress
+
+
+class State(NamedTuple):
+    params: DemParams
+    x: np.ndarray          # (N,2) [m]
+    v: np.ndarray          # (N,2) [m/s]
+    w: np.ndarray          # (N,) [rad/s]
+    theta: np.ndarray      # (N,) [rad]
+    r: np.ndarray          # (N,) [m]
+    walls: np.ndarray      # (4,) [x_left, x_right, y_bottom, y_top] [m]
+    walls_ref: np.ndarray  # (4,) walls at the last neighbour rebuild
+    prev: np.ndarray       # (4,) last servo displacement [m]
+    x_ref: np.ndarray      # (N,2) positions at the last neighbour rebuild
+    pi: np.ndarray         # (P,) int32
+    pj: np.ndarray         # (P,) int32
+    ft: np.ndarray         # (P,) tangential history [N]
+    step: int
+    time: float
+    mu: float              # current friction coefficient (reduced during compaction)
+    cap_on: bool           # Coulomb cap active (False = sliding prevented)
+    control: Control
+    ref_len: np.ndarray    # (2,) (W0, H0) reference lengths for strains [m]
+
+
+class Snapshot(NamedTuple):
+    """Contacts and derived measures at one configuration (see kernels.contact_snapshot)."""
+    ci: np.ndarray
+    cj: np.ndarray
+    fx: np.ndarray
+    fy: np.ndarray
+    fn: np.ndarray
+    wp: np.ndarray
+    ww: np.ndarray
+    wf: np.ndarray
+
+
+class Simulation:
+    """Mutable simulation; all heavy loops are in `kernels`."""
+
+    def __init__(self, state: State):
+        p = state.params
+        self.params = p
+        c = lambda a, dt=float: np.array(a, dtype=dt, copy=True)
+        self.x, self.v, self.w, self.theta = c(state.x), c(state.v), c(state.w), c(state.theta)
+        self.r = c(state.r)
+        self.m = p.density * math.pi * self.r ** 2 * p.thickness
+        self.inertia = 0.5 * self.m * self.r ** 2
+        self.walls, self.walls_ref, self.prev = c(state.walls), c(state.walls_ref), c(state.prev)
+        self.x_ref = c(state.x_ref)
+        self.step = int(state.step)
+        self.time = float(state.time)
+        self.mu = float(state.mu)
+        self.cap_on = bool(state.cap_on)
+        self.control = state.control
+        self.ref_len = c(state.ref_len)
+        self.damping = p.damping
+        self.dt = p.dt
+        n = len(self.r)
+        self.fext = np.zeros((n, 2))
+        self.fnet = np.zeros((n, 3))
+        self.disp2 = np.zeros(n)
+        self.wF = np.zeros(4)
+        self.wK = np.zeros(4)
+        # The list is rebuilt from the *reference* positions so that a loaded state gets
+        # exactly the candidate lists the original run had.
+        self.pairs = finish_pair_list(self.x_ref, self.r, self.walls_ref, p.skin,
+                                      c(state.pi, np.int32), c(state.pj, np.int32), c(state.ft))
+        self._alloc_pair_buffers()
+        self.n_rebuilds = 0
+        self.vmax_override = None  # wall speed cap override [m/s] (compaction only)
+
+    # ------------------------------------------------------------------------------
+    @classmethod
+    def new(cls, params: DemParams, x, r, walls, mu=None, control=None):
+        """Fresh simulation at rest from positions x (N,2), radii r (N,), walls (4,)."""
+        x = np.asarray(x, float)
+        r = np.asarray(r, float)
+        walls = np.asarray(walls, float)
+        validate_geometry(x, r, walls)
+        n = len(r)
+        st = State(params, x, np.zeros((n, 2)), np.zeros(n), np.zeros(n), r, walls,
+                   walls.copy(), np.zeros(4), x.copy(), np.zeros(0, np.int32),
+                   np.zeros(0, np.int32), np.zeros(0), 0, 0.0,
+                   params.mu if mu is None else mu, True,
+                   control if control is not None else Control(),
+                   np.array([walls[1] - walls[0], walls[3] - walls[2]]))
+        sim = cls(st)
+        sim.rebuild()
+        return sim
+
+    def _alloc_pair_buffers(self):
+        npair = len(self.pairs.pi)
+        self.fpx = np.zeros(npair)
+        self.fpy = np.zeros(npair)
+
+    def rebuild(self):
+        """Rebuild the pair list at the current positions, carrying tangential history."""
+        pl = self.pairs
+        self.pairs = build_pair_list(self.x, self.r, self.walls, self.params.skin,
+                                     pl.pi, pl.pj, pl.ft)
+        self.x_ref[:] = self.x
+        self.walls_ref[:] = self.walls
+        self.fext[:] = 0.0
+        self._alloc_pair_buffers()
+        self.n_rebuilds += 1
+
+    def _needs_rebuild(self):
+        hs = 0.5 * self.params.skin
+        return (np.abs(self.walls - self.walls_ref).max() > hs) or (self.disp2.max() > hs * hs)
+
+    # ------------------------------------------------------------------------------
+    def run(self, nsteps: int):
+        """Advance nsteps time steps under the current control."""
+        p = self.params
+        mode, s_from, s_to, ramp_start, ramp_len, rate, len0 = self.control.arrays()
+        left = int(nsteps)
+        while left > 0:
+            pl = self.pairs
+            done = kernels.advance(
+                left, self.x, self.v, self.w, self.theta, self.r, self.m, self.inertia,
+                pl.pi, pl.pj, pl.ft, self.fpx, self.fpy, pl.inc_off, pl.inc_ent,
+                pl.cand_off, pl.cand, self.fext, self.fnet, self.x_ref, self.walls_ref,
+                self.disp2, self.walls, self.prev, self.wF, self.wK,
+                mode, s_from, s_to, ramp_start, ramp_len, rate, len0, self.step,
+                p.kn, p.kt, self.mu, self.cap_on, p.normal_damping_ratio, self.damping,
+                self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
+                self.vmax_override or p.servo_vmax,
+                0.5 * p.skin)
+            left -= done
+            self.step += done
+            self.time = self.step * self.dt
+            if self._needs_rebuild():
+                self.rebuild()
+            if self.walls[1] <= self.walls[0] or self.walls[3] <= self.walls[2]:
+                raise RuntimeError("walls crossed: the servo or strain control is unstable")
+
+    def set_control(self, control: Control):
+        self.control = control
+
+    # ------------------------------------------------------------------------------
+    def state(self) -> State:
+        """Immutable copy of everything needed to continue the run."""
+        c = np.copy
+        pl = self.pairs
+        return State(self.params, c(self.x), c(self.v), c(self.w), c(self.theta), c(self.r),
+                     c(self.walls), c(self.walls_ref), c(self.prev), c(self.x_ref),
+                     c(pl.pi), c(pl.pj), c(pl.ft), self.step, self.time, self.mu,
+                     self.cap_on, self.control, c(self.ref_len))
+
+    def snapshot(self) -> Snapshot:
+        pl = self.pairs
+        return Snapshot(*kernels.contact_snapshot(self.x, self.r, pl.pi, pl.pj, pl.ft,
+                                                  self.walls, self.params.kn))
+
+    # Measures ------------------------------------------------------------------------
+    @property
+    def n(self):
+        return len(self.r)
+
+    @property
+    def size(self):
+        """(W, H) box size [m]."""
+        return np.array([self.walls[1] - self.walls[0], self.walls[3] - self.walls[2]])
+
+    @property
+    def volume(self):
+        w, h = self.size
+        return w * h * self.params.thickness
+
+    def porosity(self):
+        w, h = self.size
+        return 1.0 - math.pi * float(np.sum(self.r ** 2)) / (w * h)
+
+    def wall_stress(self, snap: Snapshot | None = None):
+        """(s_xx, s_yy) [Pa], compression positive, from the wall forces at the current
+        positions."""
+        snap = snap or self.snapshot()
+        wF = np.bincount(snap.ww, weights=snap.wf, minlength=4)
+        return wall_stress(wF, self.walls, self.params.thickness)
+
+    def love_weber(self, snap: Snapshot | None = None):
+        """Love-Weber stress (2,2) [Pa], compression positive: -(1/V) sum over particles of
+        sum_c f_c (x) (x_c - x_p), wall contacts included (paper Eq. 12-13)."""
+        snap = snap or self.snapshot()
+        s = kernels.particle_stress(self.x, self.r, snap.ci, snap.cj, snap.fx, snap.fy,
+                                    snap.wp, snap.ww, snap.wf)
+        return -s.sum(axis=0) / self.volume
+
+    def strain(self):
+        """(eps_xx, eps_yy) engineering strains from the walls, compression positive."""
+        return (self.ref_len - self.size) / self.ref_len
+
+    def unbalanced(self, snap: Snapshot | None = None):
+        """Unbalanced-force ratio: mean |net force| / mean |contact force| (0 if no contact)."""
+        snap = snap or self.snapshot()
+        f = kernels.net_forces(self.n, self.x, snap.ci, snap.cj, snap.fx, snap.fy,
+                               snap.wp, snap.ww, snap.wf)
+        fc = np.concatenate([np.hypot(snap.fx, snap.fy), snap.wf])
+        if fc.size == 0 or fc.mean() == 0:
+            return 0.0
+        return float(np.hypot(f[:, 0], f[:, 1]).mean() / fc.mean())
+
+    def kinetic_energy(self):
+        return 0.5 * float(np.sum(self.m[:, None] * self.v ** 2) + np.sum(self.inertia * self.w ** 2))
+
+
+def validate_geometry(x, r, walls):
+    """ValueError for impossible inputs (negative radius, crossed walls, shapes)."""
+    if x.ndim != 2 or x.shape[1] != 2 or r.ndim != 1 or len(r) != len(x):
+        raise ValueError(f"positions must be (N,2) and radii (N,); got {x.shape} and {r.shape}")
+    if len(r) == 0:
+        raise ValueError("n=0 particles; allowed range: n >= 1")
+    if not np.all(np.isfinite(r)) or np.any(r <= 0):
+        raise ValueError(f"radius must be > 0 [m]; got min radius {float(np.min(r))!r}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("positions must be finite")
+    if walls.shape != (4,) or not np.all(np.isfinite(walls)):
+        raise ValueError("walls must be 4 finite numbers [x_left, x_right, y_bottom, y_top]")
+    if walls[1] <= walls[0] or walls[3] <= walls[2]:
+        raise ValueError(f"walls overlap: walls={walls.tolist()}; allowed range: "
+                         "x_left < x_right and y_bottom < y_top")

@@ -1,0 +1,60 @@
+"""Boundary control of the four rigid frictionless walls.
+
+A `Control` says, per axis (0 = x walls = lateral = axis 2, 1 = y walls = axial = axis 1),
+whether the walls are stress controlled (servo, YADE TriaxialStressController-like) or
+strain-rate controlled.  Stresses are compression positive [Pa], strain rates compression
+positive [1/s].  The servo itself is `kernels.servo_walls`.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+STRESS, STRAIN = 0, 1
+
+
+class Control(NamedTuple):
+    mode: tuple = (STRESS, STRESS)        # per axis (x, y)
+    s_from: tuple = (0.0, 0.0)            # stress at ramp start [Pa]
+    s_to: tuple = (0.0, 0.0)              # stress at ramp end [Pa]
+    ramp_start: int = 0                   # global step where the ramp starts
+    ramp_len: int = 0                     # ramp length in steps (0 = step change)
+    rate: tuple = (0.0, 0.0)              # strain rate per axis [1/s], compression > 0
+    len0: tuple = (1.0, 1.0)              # reference lengths (W0, H0) for the strain rate [m]
+
+    def arrays(self):
+        return (np.asarray(self.mode, np.int64), np.asarray(self.s_from, float),
+                np.asarray(self.s_to, float), int(self.ramp_start), int(self.ramp_len),
+                np.asarray(self.rate, float), np.asarray(self.len0, float))
+
+
+def isotropic(stress, ramp_from=None, step=0, ramp_len=0) -> Control:
+    """Both axes stress controlled at `stress` [Pa]."""
+    s0 = (stress, stress) if ramp_from is None else tuple(ramp_from)
+    return Control((STRESS, STRESS), s0, (stress, stress), step, ramp_len)
+
+
+def stress_path(s_from, s_to, step, ramp_len) -> Control:
+    """Both axes stress controlled, linear ramp from s_from to s_to (sx, sy) [Pa]."""
+    return Control((STRESS, STRESS), tuple(s_from), tuple(s_to), step, ramp_len)
+
+
+def biaxial(lateral_stress, axial_rate, len0) -> Control:
+    """Drained biaxial: y walls at axial strain rate, x walls hold lateral stress."""
+    return Control((STRESS, STRAIN), (lateral_stress, 0.0), (lateral_stress, 0.0), 0, 0,
+                   (0.0, axial_rate), tuple(len0))
+
+
+def strain_rate(rate_x, rate_y, len0) -> Control:
+    """Both axes strain-rate controlled."""
+    return Control((STRAIN, STRAIN), (0.0, 0.0), (0.0, 0.0), 0, 0, (rate_x, rate_y),
+                   tuple(len0))
+
+
+def wall_stress(wF, walls, thickness):
+    """(s_xx, s_yy) [Pa] compression positive, from the wall forces wF (4,) [N]."""
+    w = walls[1] - walls[0]
+    h = walls[3] - walls[2]
+    return np.array([0.5 * (wF[0] + wF[1]) / (h * thickness),
+                     0.5 * (wF[2] + wF[3]) / (w * thickness)])

@@ -1,0 +1,185 @@
+"""Files: state save/load (npz), CSV, VTK snapshots (meshio).  Every write goes to a
+temporary file in the target directory and is moved in place with os.replace, so an
+interrupted run never leaves a half-written file under the final name.
+
+State file format (npz, FORMAT_VERSION = 1), arrays:
+  format ("dem-state"), format_version (int), params (JSON of DemParams),
+  x, v (N,2), w, theta, r (N,), walls, walls_ref, prev (4,), x_ref (N,2),
+  pi, pj (P,) int32, ft (P,), step, time, mu, cap_on,
+  ctrl_mode (2,), ctrl_s_from, ctrl_s_to (2,), ctrl_ramp (2,) [start, len], ctrl_rate,
+  ctrl_len0 (2,), ref_len (2,), meta (JSON, free-form).
+"""
+from __future__ import annotations
+
+import csv
+import io as _io
+import json
+import os
+import tempfile
+import zipfile
+
+import numpy as np
+
+from .params import DemParams
+from .simulation import State, Simulation
+from .walls import Control
+
+FORMAT = "dem-state"
+FORMAT_VERSION = 1
+
+
+def atomic_write_bytes(path, data: bytes):
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=os.path.basename(path))
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def save_state(path, state: State, meta: dict | None = None):
+    """Write a complete State to `path` (npz) atomically."""
+    c = state.control
+    buf = _io.BytesIO()
+    np.savez(buf, format=np.array(FORMAT), format_version=np.array(FORMAT_VERSION),
+             params=np.array(json.dumps(state.params.to_dict())),
+             x=state.x, v=state.v, w=state.w, theta=state.theta, r=state.r,
+             walls=state.walls, walls_ref=state.walls_ref, prev=state.prev, x_ref=state.x_ref,
+             pi=state.pi, pj=state.pj, ft=state.ft, step=np.array(state.step),
+             time=np.array(state.time), mu=np.array(state.mu), cap_on=np.array(state.cap_on),
+             ctrl_mode=np.asarray(c.mode, np.int64), ctrl_s_from=np.asarray(c.s_from, float),
+             ctrl_s_to=np.asarray(c.s_to, float),
+             ctrl_ramp=np.array([c.ramp_start, c.ramp_len], np.int64),
+             ctrl_rate=np.asarray(c.rate, float), ctrl_len0=np.asarray(c.len0, float),
+             ref_len=state.ref_len, meta=np.array(json.dumps(meta or {})))
+    atomic_write_bytes(path, buf.getvalue())
+
+
+_KEYS = ["format", "format_version", "params", "x", "v", "w", "theta", "r", "walls",
+         "walls_ref", "prev", "x_ref", "pi", "pj", "ft", "step", "time", "mu", "cap_on",
+         "ctrl_mode", "ctrl_s_from", "ctrl_s_to", "ctrl_ramp", "ctrl_rate", "ctrl_len0",
+         "ref_len"]
+
+
+def load_state(path) -> tuple[State, dict]:
+    """Read a state file.  ValueError if it is truncated, not a DEM state, or of another
+    format version (allowed: FORMAT_VERSION)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            missing = [k for k in _KEYS if k not in z.files]
+            if missing:
+                raise ValueError(f"state file {path}: not a DEM state (missing {missing})")
+            d = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, EOFError, OSError, KeyError) as e:
+        raise ValueError(f"state file {path} is truncated or not a valid npz: {e}") from None
+    except ValueError as e:
+        if "state file" in str(e):
+            raise
+        raise ValueError(f"state file {path} is truncated or corrupt: {e}") from None
+    if str(d["format"]) != FORMAT:
+        raise ValueError(f"state file {path}: format={str(d['format'])!r}; allowed: {FORMAT!r}")
+    ver = int(d["format_version"])
+    if ver != FORMAT_VERSION:
+        raise ValueError(f"state file {path}: format_version={ver}; allowed range: "
+                         f"format_version == {FORMAT_VERSION}")
+    params = DemParams.from_dict(json.loads(str(d["params"])))
+    n = len(d["r"])
+    for k in ("x", "v", "x_ref"):
+        if d[k].shape != (n, 2):
+            raise ValueError(f"state file {path}: {k} has shape {d[k].shape}, expected ({n}, 2)")
+    if not (len(d["pi"]) == len(d["pj"]) == len(d["ft"])):
+        raise ValueError(f"state file {path}: inconsistent pair list lengths")
+    ctrl = Control(tuple(int(a) for a in d["ctrl_mode"]), tuple(map(float, d["ctrl_s_from"])),
+                   tuple(map(float, d["ctrl_s_to"])), int(d["ctrl_ramp"][0]),
+                   int(d["ctrl_ramp"][1]), tuple(map(float, d["ctrl_rate"])),
+                   tuple(map(float, d["ctrl_len0"])))
+    st = State(params, d["x"], d["v"], d["w"], d["theta"], d["r"], d["walls"], d["walls_ref"],
+               d["prev"], d["x_ref"], d["pi"].astype(np.int32), d["pj"].astype(np.int32),
+               d["ft"], int(d["step"]), float(d["time"]), float(d["mu"]), bool(d["cap_on"]),
+               ctrl, d["ref_len"])
+    meta = json.loads(str(d["meta"])) if "meta" in d else {}
+    return st, meta
+
+
+def write_csv(path, header, rows):
+    """Atomic CSV write: header (list of names), rows (iterable of sequences)."""
+    buf = _io.StringIO()
+    wr = csv.writer(buf, lineterminator="\n")
+    wr.writerow(header)
+    for row in rows:
+        wr.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else v for v in row])
+    atomic_write_bytes(path, buf.getvalue().encode())
+
+
+def read_csv(path):
+    """(header, rows as list of dicts with float values where possible)."""
+    with open(path, newline="") as f:
+        rd = csv.DictReader(f)
+        out = []
+        for row in rd:
+            rr = {}
+            for k, v in row.items():
+                try:
+                    rr[k] = float(v)
+                except (TypeError, ValueError):
+                    rr[k] = v
+            out.append(rr)
+        return rd.fieldnames, out
+
+
+def _atomic_meshio(path, mesh):
+    import meshio
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=".vtu")
+    os.close(fd)
+    try:
+        meshio.write(tmp, mesh, file_format="vtu")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_particles_vtk(path, sim: Simulation):
+    """Particles as VTK vertices (.vtu): radius [m], velocity [m/s], spin [rad/s],
+    stress (per-particle sum f (x) (x_c - x_p) / particle volume [Pa], compression
+    positive, flattened xx, xy, yx, yy)."""
+    import meshio
+    from . import kernels
+    snap = sim.snapshot()
+    s = kernels.particle_stress(sim.x, sim.r, snap.ci, snap.cj, snap.fx, snap.fy,
+                                snap.wp, snap.ww, snap.wf)
+    vol = np.pi * sim.r ** 2 * sim.params.thickness
+    s = -s / vol[:, None, None]
+    pts = np.column_stack([sim.x, np.zeros(sim.n)])
+    mesh = meshio.Mesh(pts, [("vertex", np.arange(sim.n).reshape(-1, 1))],
+                       point_data={"radius": sim.r.copy(),
+                                   "velocity": np.column_stack([sim.v, np.zeros(sim.n)]),
+                                   "spin": sim.w.copy(),
+                                   "stress": s.reshape(-1, 4)})
+    _atomic_meshio(path, mesh)
+
+
+def write_contacts_vtk(path, sim: Simulation):
+    """Contact network as VTK lines between particle centres with cell data
+    normal_force [N] and tangential_force [N]."""
+    import meshio
+    snap = sim.snapshot()
+    pts = np.column_stack([sim.x, np.zeros(sim.n)])
+    lines = np.column_stack([snap.ci, snap.cj]).astype(np.int64)
+    ft = np.hypot(snap.fx, snap.fy) ** 2 - snap.fn ** 2
+    ft = np.sqrt(np.clip(ft, 0, None))
+    mesh = meshio.Mesh(pts, [("line", lines)],
+                       cell_data={"normal_force": [snap.fn.copy()], "tangential_force": [ft]})
+    _atomic_meshio(path, mesh)

@@ -309,3 +309,134 @@ def allocate_outputs(npts, ndir):
             np.empty((npts, 3)), np.empty((npts, 3, 3)), np.empty((npts, 3, 3)),
             np.empty((npts, 3)), np.empty((npts, 3)),
             np.empty(npts), np.empty(npts), np.empty(npts))
+
+
+@njit(cache=True)
+def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
+                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding,
+                      strain_controlled, de_start, target, tol, max_iter,
+                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                      o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
+    """Newton with backtracking on the stress-controlled components of one point (npts = 1).
+
+    strain_controlled : (3,) bool; de_start : (3,) start increment (strain-controlled entries are
+    the prescribed ones); target : (3,) stress [Pa] of the stress-controlled entries.
+    Outputs (the ``o_*`` buffers) hold the accepted update. Returns (iterations, residual,
+    d_eps (1, 3)); iterations = -1 when Newton did not converge in ``max_iter``.
+    """
+    nfree = 0
+    free = np.empty(3, dtype=np.int64)
+    for k in range(3):
+        if not strain_controlled[k]:
+            free[nfree] = k
+            nfree += 1
+    de = de_start.copy().reshape(1, 3)
+    ndir = d1.shape[1]
+    # trial buffers for the backtracking line search
+    b_d1 = np.empty((1, ndir)); b_d2 = np.empty((1, ndir)); b_al = np.empty((1, ndir))
+    b_N1 = np.empty((1, ndir)); b_T1 = np.empty((1, ndir)); b_N2 = np.empty((1, ndir))
+    b_l1 = np.empty((1, ndir)); b_l2 = np.empty((1, ndir))
+    b_sl = np.empty((1, ndir), dtype=np.bool_); b_op = np.empty((1, ndir), dtype=np.bool_)
+    b_sig = np.empty((1, 3)); b_tan = np.empty((1, 3, 3)); b_tanL = np.empty((1, 3, 3))
+    b_dPi = np.empty((1, 3)); b_T3 = np.empty((1, 3))
+    b_w2 = np.empty(1); b_w2n = np.empty(1); b_w2t = np.empty(1)
+    update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
+                  cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding,
+                  o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                  o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
+    rn = 0.0
+    for k in range(nfree):
+        rn = max(rn, abs(o_sig[0, free[k]] - target[free[k]]))
+    if nfree == 0:
+        return 1, 0.0, de
+    J = np.empty((nfree, nfree))
+    r = np.empty(nfree)
+    for it in range(1, max_iter + 1):
+        if rn <= tol:
+            return it, rn, de
+        for a in range(nfree):
+            r[a] = o_sig[0, free[a]] - target[free[a]]
+            for b in range(nfree):
+                J[a, b] = o_tan[0, free[a], free[b]]
+        step = np.linalg.solve(J, r)
+        lam = 1.0
+        trial = de.copy()
+        while True:
+            for a in range(nfree):
+                trial[0, free[a]] = de[0, free[a]] - lam * step[a]
+            update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, trial,
+                          cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding,
+                          b_d1, b_d2, b_al, b_N1, b_T1, b_N2, b_l1, b_l2, b_sl, b_op,
+                          b_sig, b_tan, b_tanL, b_dPi, b_T3, b_w2, b_w2n, b_w2t)
+            rt = 0.0
+            for a in range(nfree):
+                rt = max(rt, abs(b_sig[0, free[a]] - target[free[a]]))
+            # the stress is continuous but only piecewise smooth (sliding switches): backtrack
+            if rt < (1.0 - 1e-4 * lam) * rn or lam < 1e-8:
+                break
+            lam *= 0.5
+        de[:, :] = trial
+        rn = rt
+        o_d1[:, :] = b_d1; o_d2[:, :] = b_d2; o_alpha[:, :] = b_al
+        o_N1[:, :] = b_N1; o_T1[:, :] = b_T1; o_N2[:, :] = b_N2
+        o_l1[:, :] = b_l1; o_l2[:, :] = b_l2; o_sliding[:, :] = b_sl; o_open[:, :] = b_op
+        o_sig[:, :] = b_sig; o_tan[:, :, :] = b_tan; o_tanL[:, :, :] = b_tanL
+        o_dPi[:, :] = b_dPi; o_T3[:, :] = b_T3; o_w2[:] = b_w2; o_w2n[:] = b_w2n; o_w2t[:] = b_w2t
+    if rn <= tol:
+        return max_iter, rn, de
+    return -1, rn, de
+
+
+@njit(cache=True)
+def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
+                cos_t, sin_t, omega, kn, kt, mu, r_g,
+                strain_controlled, d_eps, sig_start, d_sigma, k_start, n_steps, guess, tol, max_iter,
+                h_de, h_sig, h_it, h_nsl, h_nop, last_sliding):
+    """``n_steps`` mixed-control steps of one point, in place on the state arrays (copies owned
+    by the caller). Step k (1-based, from ``k_start`` + 1) targets sig_start + k d_sigma on the
+    stress-controlled entries. Histories h_* get one row per step: strain increment (3,),
+    stress (3,), Newton iterations, sliding and open counts. Returns the number of steps done
+    (fewer than ``n_steps`` when a step failed to converge) and the last residual."""
+    ndir = d1.shape[1]
+    out_h = [np.empty((1, ndir)) for _ in range(8)]
+    o_sl = np.empty((1, ndir), dtype=np.bool_)
+    o_op = np.empty((1, ndir), dtype=np.bool_)
+    o_sig = np.empty((1, 3)); o_tan = np.empty((1, 3, 3)); o_tanL = np.empty((1, 3, 3))
+    o_dPi = np.empty((1, 3)); o_T3 = np.empty((1, 3))
+    o_w2 = np.empty(1); o_w2n = np.empty(1); o_w2t = np.empty(1)
+    target = np.empty(3)
+    de0 = guess.copy()
+    rn = 0.0
+    for k in range(n_steps):
+        for c in range(3):
+            target[c] = sig_start[c] + (k_start + k + 1) * d_sigma[c]
+            if strain_controlled[c]:
+                de0[c] = d_eps[c]
+        it, rn, de = mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
+                                       cos_t, sin_t, omega, kn, kt, mu, r_g, True,
+                                       strain_controlled, de0, target, tol, max_iter,
+                                       out_h[0], out_h[1], out_h[2], out_h[3], out_h[4], out_h[5],
+                                       out_h[6], out_h[7], o_sl, o_op,
+                                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
+        if it < 0:
+            return k, rn
+        d1[:, :] = out_h[0]; d2[:, :] = out_h[1]; alpha[:, :] = out_h[2]
+        N1[:, :] = out_h[3]; T1[:, :] = out_h[4]; N2[:, :] = out_h[5]
+        l1[:, :] = out_h[6]; l2[:, :] = out_h[7]; was_open[:, :] = o_op
+        last_sliding[:, :] = o_sl
+        for c in range(3):
+            eps[0, c] += de[0, c]
+            de0[c] = de[0, c]
+            h_de[k, c] = de[0, c]
+            h_sig[k, c] = o_sig[0, c]
+        h_it[k] = it
+        ns = 0
+        no = 0
+        for i in range(ndir):
+            if o_sl[0, i]:
+                ns += 1
+            if o_op[0, i]:
+                no += 1
+        h_nsl[k] = ns
+        h_nop[k] = no
+    return n_steps, rn

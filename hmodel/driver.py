@@ -14,7 +14,9 @@ from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
-from .material import HState, reference_state, update_full, to_voigt
+from . import _kernels
+from .material import (HState, reference_state, to_voigt, kernel_args, _material_args,
+                       increment_from_outputs)
 from .params import HParams
 
 __all__ = [
@@ -100,48 +102,21 @@ def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_targ
     guess : (3,) initial strain increment (the strain-controlled entries are overwritten).
     Returns (Increment, d_eps (3,), iterations). Raises MixedControlError if Newton fails.
     """
-    sc = np.array(control.strain_controlled)
-    free = np.flatnonzero(~sc)
+    sc = np.array(control.strain_controlled, dtype=np.bool_)
     de = np.zeros(3) if guess is None else np.array(guess, dtype=float)
     de[sc] = np.asarray(control.d_eps)[sc]
     target = np.asarray(sigma_target, dtype=float)
     scale = max(float(np.max(np.abs(target))), 1e-3 * params.p0)
     tol = rtol * scale
-    n_eval = 0
-
-    def evaluate(x):
-        inc = update_full(state, _tensor(x), params)
-        r = to_voigt(inc.stress)[0][free] - target[free]
-        return inc, r, float(np.max(np.abs(r))) if free.size else 0.0
-
-    inc, r, rn = evaluate(de)
-    n_eval += 1
-    for it in range(1, max_iter + 1):
-        if rn <= tol:
-            return inc, de, it
-        J = _voigt_tangent(inc.tangent)[np.ix_(free, free)]
-        try:
-            step = np.linalg.solve(J, r)
-        except np.linalg.LinAlgError:
-            raise MixedControlError(
-                f"singular tangent on the stress-controlled components {free.tolist()}") from None
-        # Backtracking on the residual: the stress is continuous but only piecewise smooth in
-        # d_eps (sliding-pattern switches), where a full Newton step can cycle.
-        lam = 1.0
-        while True:
-            trial = de.copy()
-            trial[free] -= lam * step
-            inc_t, r_t, rn_t = evaluate(trial)
-            n_eval += 1
-            if rn_t < (1.0 - 1e-4 * lam) * rn or lam < 1e-8:
-                break
-            lam *= 0.5
-        de, inc, r, rn = trial, inc_t, r_t, rn_t
-    if rn <= tol:
-        return inc, de, max_iter
-    raise MixedControlError(
-        f"mixed-control step did not converge in {max_iter} Newton iterations "
-        f"(last stress residual {rn:.3e} Pa, tolerance {tol:.3e} Pa); try a smaller step")
+    args = kernel_args(state, params)
+    out = _kernels.allocate_outputs(1, state.n_dir)
+    it, rn, de_out = _kernels.mixed_step_single(
+        *args[:-1], *_material_args(params), True, sc, de, target, tol, int(max_iter), *out)
+    if it < 0:
+        raise MixedControlError(
+            f"mixed-control step did not converge in {max_iter} Newton iterations "
+            f"(last stress residual {rn:.3e} Pa, tolerance {tol:.3e} Pa); try a smaller step")
+    return increment_from_outputs(state, de_out, out), de_out[0].copy(), int(it)
 
 
 def _voigt_tangent(C):
@@ -156,42 +131,119 @@ def _voigt_tangent(C):
 
 def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int,
              until: Callable[[np.ndarray, np.ndarray], bool] | None = None,
-             keep_states: bool = False, progress: bool = False, label: str = "path") -> PathResult:
+             keep_states: bool = False, progress: bool = False, label: str = "path",
+             rtol: float = 1e-10, max_iter: int = 40, chunk: int = 250) -> PathResult:
     """Run ``n_steps`` steps of ``control`` from ``state`` (a single point), or stop after the
-    first step for which ``until(eps, sigma)`` is true (eps, sigma: (3,) arrays).
+    first step for which ``until(eps, sigma)`` is true (eps, sigma: (3,) arrays, eps counted
+    from the start of the path).
 
-    Stress targets accumulate from the start stress: sigma_target = sigma_0 + k d_sigma.
+    Stress targets accumulate from the start stress: sigma_target = sigma_0 + k d_sigma. The steps
+    run in a Numba loop, ``chunk`` steps at a time (``until`` is checked between chunks and the
+    chunk is replayed up to the first step that satisfies it). A step whose Newton iterations do
+    not converge raises MixedControlError carrying the converged part as ``.partial``.
     """
     if state.batch_shape != ():
         raise ValueError("run_path drives a single material point (batch shape ())")
     if int(n_steps) < 1:
         raise ValueError(f"n_steps must be >= 1, got {n_steps}")
     n_steps = int(n_steps)
+    if keep_states:
+        return _run_path_steps(state, params, control, n_steps, until, progress, label, rtol, max_iter)
+    sig0 = to_voigt(state.stress)[0]
+    scale = max(float(np.max(np.abs(sig0))), float(np.max(np.abs(sig0 + n_steps * np.asarray(control.d_sigma)))),
+                1e-3 * params.p0)
+    tol = rtol * scale
+    work = [a.copy() for a in kernel_args(state, params)[:-1]]
+    sliding = np.ascontiguousarray(state.sliding, dtype=np.bool_).reshape(1, -1).copy()
+    margs = _material_args(params)
+    sc = np.array(control.strain_controlled, dtype=np.bool_)
+    d_eps = np.asarray(control.d_eps, dtype=float)
+    d_sig = np.asarray(control.d_sigma, dtype=float)
+    h_de = np.zeros((n_steps, 3)); h_sig = np.zeros((n_steps, 3))
+    h_it = np.zeros(n_steps, dtype=np.int64); h_nsl = np.zeros(n_steps, dtype=np.int64)
+    h_nop = np.zeros(n_steps, dtype=np.int64)
+    guess = np.zeros(3)
+    done = 0
+    bar = _Progress(n_steps, label) if progress else None
+    failed = None
+    while done < n_steps:
+        m = min(int(chunk), n_steps - done)
+        saved = [a.copy() for a in work] + [sliding.copy()]
+        sl = slice(done, done + m)
+        n, rn = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, m, guess, tol,
+                                     int(max_iter), h_de[sl], h_sig[sl], h_it[sl], h_nsl[sl],
+                                     h_nop[sl], sliding)
+        stop_at = None
+        if until is not None and n > 0:
+            eps_rows = np.cumsum(h_de[:done + n], axis=0)[done:]
+            for j in range(n):
+                if until(eps_rows[j], h_sig[done + j]):
+                    stop_at = j
+                    break
+        if stop_at is not None and stop_at + 1 < n:
+            work = saved[:-1]
+            sliding = saved[-1]
+            n, rn = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, stop_at + 1,
+                                         guess, tol, int(max_iter), h_de[sl], h_sig[sl], h_it[sl],
+                                         h_nsl[sl], h_nop[sl], sliding)
+        if n > 0:
+            guess = h_de[done + n - 1].copy()
+        done += n
+        if bar is not None:
+            bar.update(done)
+        if n < m and stop_at is None:
+            failed = (done + 1, rn)
+            break
+        if stop_at is not None:
+            break
+    if bar is not None:
+        bar.close()
+    result = _path_result(state, work, sliding, sig0, h_de[:done], h_sig[:done], h_it[:done],
+                          h_nsl[:done], h_nop[:done])
+    if failed is not None:
+        err = MixedControlError(
+            f"{label}: mixed-control step {failed[0]} did not converge in {max_iter} Newton "
+            f"iterations (last stress residual {failed[1]:.3e} Pa, tolerance {tol:.3e} Pa); "
+            f"try a smaller step")
+        err.partial = result
+        raise err
+    return result
+
+
+def _path_result(state, work, sliding, sig0, h_de, h_sig, h_it, h_nsl, h_nop) -> PathResult:
+    n = state.n_dir
+    d1, d2, al, N1, T1, N2, l1, l2, was_open, eps, V0 = work
+    last_sig = h_sig[-1] if len(h_sig) else sig0
+    final = HState(d1=d1.reshape(n), d2=d2.reshape(n), alpha=al.reshape(n), N1=N1.reshape(n),
+                   T1=T1.reshape(n), N2=N2.reshape(n), l1=l1.reshape(n), l2=l2.reshape(n),
+                   eps=_tensor(eps[0]), stress=_tensor(last_sig), V0=np.array(float(V0[0])),
+                   sliding=sliding.reshape(n).copy(), is_open=was_open.reshape(n).copy())
+    return PathResult(
+        eps=np.vstack([np.zeros(3), np.cumsum(h_de, axis=0)]), sigma=np.vstack([sig0, h_sig]),
+        newton_iters=np.concatenate([[0], h_it]),
+        n_sliding=np.concatenate([[int(state.sliding.sum())], h_nsl]),
+        n_open=np.concatenate([[int(state.is_open.sum())], h_nop]), state=final, states=None)
+
+
+def _run_path_steps(state, params, control, n_steps, until, progress, label, rtol, max_iter):
+    """The step-by-step Python loop of run_path, keeping every state."""
     sig0 = to_voigt(state.stress)[0]
     dsig = np.asarray(control.d_sigma)
-    eps_hist = [np.zeros(3)]
-    sig_hist = [sig0.copy()]
-    iters = [0]
-    nsl = [int(state.sliding.sum())]
-    nop = [int(state.is_open.sum())]
-    states = [state] if keep_states else None
+    eps_hist, sig_hist, iters = [np.zeros(3)], [sig0.copy()], [0]
+    nsl, nop = [int(state.sliding.sum())], [int(state.is_open.sum())]
+    states = [state]
     eps = np.zeros(3)
     guess = np.zeros(3)
     bar = _Progress(n_steps, label) if progress else None
     for k in range(1, n_steps + 1):
-        target = sig0 + k * dsig
-        inc, de, it = mixed_step(state, params, control, target, guess=guess)
-        state = inc.state
-        guess = de
+        inc, de, it = mixed_step(state, params, control, sig0 + k * dsig, guess=guess, rtol=rtol,
+                                 max_iter=max_iter)
+        state, guess = inc.state, de
         eps = eps + de
         sig = to_voigt(inc.stress)[0]
-        eps_hist.append(eps.copy())
-        sig_hist.append(sig)
-        iters.append(it)
-        nsl.append(int(state.sliding.sum()))
-        nop.append(int(state.is_open.sum()))
-        if keep_states:
-            states.append(state)
+        eps_hist.append(eps.copy()); sig_hist.append(sig); iters.append(it)
+        nsl.append(int(state.sliding.sum())); nop.append(int(state.is_open.sum()))
+        states.append(state)
         if bar is not None:
             bar.update(k)
         if until is not None and until(eps, sig):

@@ -118,23 +118,17 @@ def from_voigt(v: np.ndarray, batch_shape: tuple) -> np.ndarray:
     return t
 
 
-_VOIGT = ((0, 0), (1, 1), (0, 1))
+_VOIGT_INDEX = np.array([[0, 2], [2, 1]])          # (i, j) -> position in (11, 22, 12)
+_SHEAR_HALF = np.where(_VOIGT_INDEX == 2, 0.5, 1.0)  # d/d eps_kl of a symmetric increment
 
 
 def tangent_from_voigt(T: np.ndarray, batch_shape: tuple) -> np.ndarray:
     """(npts, 3, 3) d sigma_a / d v_b with v = (e11, e22, e12) -> (2, 2, 2, 2, *batch) with
     C[i, j, k, l] = d sigma_ij / d eps_kl for a general (non-symmetric) increment, whose
     symmetric part is what the material sees: C has both minor symmetries."""
-    C = np.empty((2, 2, 2, 2) + tuple(batch_shape))
-    for a, (i, j) in enumerate(_VOIGT):
-        for b, (k, l) in enumerate(_VOIGT):
-            val = T[:, a, b].reshape(batch_shape)
-            if b == 2:
-                val = 0.5 * val
-            for (ii, jj) in {(i, j), (j, i)}:
-                for (kk, ll) in {(k, l), (l, k)}:
-                    C[ii, jj, kk, ll] = val
-    return C
+    I = _VOIGT_INDEX
+    C = T[:, I[:, :, None, None], I[None, None, :, :]] * _SHEAR_HALF[None, None, None, :, :]
+    return np.moveaxis(C, 0, -1).reshape((2, 2, 2, 2) + tuple(batch_shape))
 
 
 # -- states ------------------------------------------------------------------------------------
@@ -195,23 +189,41 @@ def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = Tru
         raise ValueError(f"d_eps must have shape (2, 2) + batch = {(2, 2) + batch}, got {d_eps.shape}")
     if not np.all(np.isfinite(d_eps)):
         raise ValueError("d_eps contains non-finite values (nan or inf)")
-    n = state.n_dir
-    if n != params.n_dir:
-        raise ValueError(f"state has n_dir = {n} orientations but params.n_dir = {params.n_dir}")
-    npts = int(np.prod(batch, dtype=int))
-    hexf = lambda a: np.ascontiguousarray(a, dtype=float).reshape(npts, n)
+    if state.n_dir != params.n_dir:
+        raise ValueError(f"state has n_dir = {state.n_dir} orientations but params.n_dir = {params.n_dir}")
+    args = kernel_args(state, params)
+    npts = args[-1].shape[0]
     de = to_voigt(d_eps)
-    eps = to_voigt(state.eps)
-    V0 = np.ascontiguousarray(state.V0, dtype=float).reshape(npts)
-    theta = params.theta
-    out = _kernels.allocate_outputs(npts, n)
+    out = _kernels.allocate_outputs(npts, state.n_dir)
     if parallel is None:
         parallel = npts >= PARALLEL_MIN_POINTS
     kern = _kernels.update_parallel if parallel else _kernels.update_serial
-    kern(*(hexf(getattr(state, f)) for f in HState._fields[:8]),
-         np.ascontiguousarray(state.is_open, dtype=np.bool_).reshape(npts, n), eps, V0, de,
-         np.cos(theta), np.sin(theta), params.omega, float(params.kn), float(params.kt),
-         float(params.mu), float(params.r_g), bool(allow_sliding), *out)
+    kern(*args[:-1], de, *_material_args(params), bool(allow_sliding), *out)
+    return increment_from_outputs(state, de, out)
+
+
+def _material_args(params: HParams):
+    theta = params.theta
+    return (np.cos(theta), np.sin(theta), params.omega, float(params.kn), float(params.kt),
+            float(params.mu), float(params.r_g))
+
+
+def kernel_args(state: HState, params: HParams):
+    """The state as the kernel takes it: 8 hexagon arrays (npts, n_dir), was_open, eps (npts, 3),
+    V0 (npts,); the last entry repeats eps for the caller's convenience."""
+    n = state.n_dir
+    npts = int(np.prod(state.batch_shape, dtype=int))
+    hexf = lambda a: np.ascontiguousarray(a, dtype=float).reshape(npts, n)
+    eps = to_voigt(state.eps)
+    return (*(hexf(getattr(state, f)) for f in HState._fields[:8]),
+            np.ascontiguousarray(state.is_open, dtype=np.bool_).reshape(npts, n),
+            eps, np.ascontiguousarray(state.V0, dtype=float).reshape(npts), eps)
+
+
+def increment_from_outputs(state: HState, de: np.ndarray, out) -> Increment:
+    """Wrap the kernel outputs ``out`` of the increment ``de`` (npts, 3) from ``state``."""
+    batch = state.batch_shape
+    n = state.n_dir
     (nd1, nd2, nal, nN1, nT1, nN2, nl1, nl2, slid, opn, sig, tan, tanL, dPi, T3, w2, w2n, w2t) = out
     hshape = batch + (n,)
     stress = from_voigt(sig, batch)
@@ -219,7 +231,7 @@ def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = Tru
         d1=nd1.reshape(hshape), d2=nd2.reshape(hshape), alpha=nal.reshape(hshape),
         N1=nN1.reshape(hshape), T1=nT1.reshape(hshape), N2=nN2.reshape(hshape),
         l1=nl1.reshape(hshape), l2=nl2.reshape(hshape),
-        eps=from_voigt(eps + de, batch), stress=stress, V0=V0.reshape(batch).copy(),
+        eps=state.eps + from_voigt(de, batch), stress=stress, V0=np.array(state.V0, dtype=float),
         sliding=slid.reshape(hshape), is_open=opn.reshape(hshape))
     return Increment(
         stress=stress, tangent=tangent_from_voigt(tan, batch), state=new_state,

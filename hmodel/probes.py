@@ -1,0 +1,276 @@
+"""Directional analysis of second-order work at one saved state (section 3.3-3.4 of the paper).
+
+All probes are run from the same saved state, batched as independent material points, so every
+probe decides its own sliding pattern (spec/hmodel.md: no pattern inherited from the path).
+
+Sign conventions (spec/hmodel.md): compression positive; every W2 signed so that an elastic
+spring gives W2 > 0. Angles in degrees. ``alpha_sigma`` as in the paper, tan(alpha_sigma) =
+dsigma1 / dsigma2, i.e. alpha_sigma = atan2(ds1, ds2) in [0, 360), measured from the ds2 axis.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .material import HState, broadcast_state, to_voigt, update_full
+from .params import HParams
+
+__all__ = ["ProbeResult", "StressProbeResult", "strain_probes", "directional_sweep",
+           "stress_probes", "tangent_criteria", "min_w2"]
+
+DEFAULT_PROBE_NORM = 1e-6   # |d_eps| of a strain probe: a tenth of the default path step
+
+
+class ProbeResult(NamedTuple):
+    """Responses to strain probes d_eps = norm (cos a_e, sin a_e) on the axes (1, 2).
+
+    Arrays of length n (one per probe) or (n, 3) in (11, 22, 12) order.
+    alpha_eps, alpha_sigma : [deg]; d_eps [-]; d_sigma = T1 + T2 + T3 the Cauchy increment (Eq. 28),
+    d_sigma_step = step(d_eps) - step(0) [Pa] (equal to d_sigma up to O(|d_eps|) terms);
+    dPi = T1 (Eq. 32), T2 = -(dV/V) sigma, T3 transport term [Pa].
+    W2 = V dPi:d_eps [J] (Lagrangian, Eq. 10); normalized by V |dPi| |d_eps|:
+    w2, w2_sigma, w2_V, w2_g (Eq. 38 split, w2 = w2_sigma + w2_V + w2_g), w2_micro (contact sum,
+    Eq. 15/36), w2n, w2t (its normal / tangential parts).
+    plastic : some closed hexagon slides; n_sliding, n_open : counts of hexagons.
+    """
+
+    alpha_eps: np.ndarray
+    d_eps: np.ndarray
+    d_sigma: np.ndarray
+    d_sigma_step: np.ndarray
+    dPi: np.ndarray
+    T2: np.ndarray
+    T3: np.ndarray
+    alpha_sigma: np.ndarray
+    W2: np.ndarray
+    w2: np.ndarray
+    w2_sigma: np.ndarray
+    w2_V: np.ndarray
+    w2_g: np.ndarray
+    w2_micro: np.ndarray
+    w2n: np.ndarray
+    w2t: np.ndarray
+    w2_hex: np.ndarray
+    plastic: np.ndarray
+    n_sliding: np.ndarray
+    n_open: np.ndarray
+
+    def take(self, idx) -> "ProbeResult":
+        return ProbeResult(*(np.asarray(f)[idx] for f in self))
+
+    @staticmethod
+    def concat(results) -> "ProbeResult":
+        return ProbeResult(*(np.concatenate([getattr(r, f) for r in results]) for f in ProbeResult._fields))
+
+
+def _ddot(a, b):
+    """a:b for rows (…, 3) of symmetric tensors in (11, 22, 12) order."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + 2.0 * a[..., 2] * b[..., 2]
+
+
+def _norm(a):
+    return np.sqrt(_ddot(a, a))
+
+
+def alpha_sigma_of(d_sigma):
+    """Response angle [deg] in [0, 360): tan(alpha_sigma) = ds1/ds2 (paper, section 3.4)."""
+    return np.degrees(np.arctan2(d_sigma[..., 0], d_sigma[..., 1])) % 360.0
+
+
+def _check_state(state: HState):
+    if state.batch_shape != ():
+        raise ValueError(f"probes start from a single-point state, got batch {state.batch_shape}")
+
+
+def strain_probes(state: HState, params: HParams, alpha_eps_deg, norm: float = DEFAULT_PROBE_NORM,
+                  allow_sliding: bool = True, shear: float = 0.0) -> ProbeResult:
+    """Strain probes d_eps = norm (cos a, sin a) in the (d_eps1, d_eps2) plane from ``state``.
+
+    ``shear`` adds d_eps12 = shear * norm to every probe (the paper's probes have none).
+    """
+    _check_state(state)
+    if not (np.isfinite(norm) and norm > 0):
+        raise ValueError(f"norm must be a finite |d_eps| > 0, got {norm!r}")
+    a = np.atleast_1d(np.asarray(alpha_eps_deg, dtype=float))
+    if not np.all(np.isfinite(a)):
+        raise ValueError("alpha_eps_deg must be finite angles in degrees")
+    n = a.size
+    de = np.zeros((n, 3))
+    de[:, 0] = norm * np.cos(np.radians(a))
+    de[:, 1] = norm * np.sin(np.radians(a))
+    de[:, 2] = shear * norm
+    d_eps = np.empty((2, 2, n))
+    d_eps[0, 0], d_eps[1, 1] = de[:, 0], de[:, 1]
+    d_eps[0, 1] = d_eps[1, 0] = de[:, 2]
+    inc = update_full(broadcast_state(state, (n,)), d_eps, params, allow_sliding=allow_sliding)
+    inc0 = update_full(state, np.zeros((2, 2)), params, allow_sliding=allow_sliding)
+    sigma = to_voigt(state.stress)[0]
+    V = float(state.volume)
+    dPi = to_voigt(inc.dPi)
+    T3 = to_voigt(inc.T3)
+    tr = de[:, 0] + de[:, 1]
+    T2 = tr[:, None] * sigma[None, :]            # -(dV/V) sigma with dV = -V tr(d_eps)
+    d_sigma = dPi + T2 + T3
+    W2 = V * _ddot(dPi, de)
+    scale = V * _norm(dPi) * _norm(de)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nrm = lambda x: x / scale
+        w2 = nrm(W2)
+        w2_sigma = nrm(V * _ddot(d_sigma, de))
+        w2_V = nrm(-V * tr * _ddot(sigma[None, :], de))
+        w2_g = nrm(-V * _ddot(T3, de))
+        w2n = nrm(inc.w2n)
+        w2t = nrm(inc.w2t)
+        w2_hex = nrm(inc.w2_micro_hex)
+    closed = ~inc.state.is_open
+    return ProbeResult(
+        alpha_eps=a, d_eps=de, d_sigma=d_sigma,
+        d_sigma_step=to_voigt(inc.stress) - to_voigt(inc0.stress)[0][None, :],
+        dPi=dPi, T2=T2, T3=T3, alpha_sigma=alpha_sigma_of(d_sigma), W2=W2,
+        w2=w2, w2_sigma=w2_sigma, w2_V=w2_V, w2_g=w2_g, w2_micro=w2n + w2t, w2n=w2n, w2t=w2t,
+        w2_hex=w2_hex, plastic=np.any(inc.state.sliding & closed, axis=-1),
+        n_sliding=np.sum(inc.state.sliding & closed, axis=-1), n_open=np.sum(inc.state.is_open, axis=-1))
+
+
+def _wrap180(x):
+    return (np.asarray(x) + 180.0) % 360.0 - 180.0
+
+
+def directional_sweep(state: HState, params: HParams, n: int = 360, norm: float = DEFAULT_PROBE_NORM,
+                      max_gap_deg: float = 1.0, max_rounds: int = 30, allow_sliding: bool = True) -> ProbeResult:
+    """Strain probes on a uniform grid of ``n`` directions, refined by bisection wherever the
+    response direction alpha_sigma jumps by more than ``max_gap_deg`` between neighbours.
+
+    Near the peak most of the plastic zone (and the instability cone) comes from a window of a few
+    degrees of strain directions (spec/hmodel.md), which a uniform sweep misses. Refinement stops
+    after ``max_rounds`` bisections of an interval (an interval of 360/n/2**30 deg is a jump of
+    the response, not a missed direction). Sorted by alpha_eps in [0, 360).
+    """
+    if int(n) < 8:
+        raise ValueError(f"n must be an integer >= 8 probe directions, got {n!r}")
+    res = strain_probes(state, params, 360.0 * np.arange(int(n)) / int(n), norm, allow_sliding)
+    min_width = 360.0 / int(n) / 2.0 ** max_rounds
+    for _ in range(max_rounds):
+        a = res.alpha_eps
+        a_next = np.roll(a, -1)
+        width = (a_next - a) % 360.0
+        gap = np.abs(_wrap180(np.roll(res.alpha_sigma, -1) - res.alpha_sigma))
+        bad = (gap > max_gap_deg) & (width > min_width)
+        if not np.any(bad):
+            break
+        mids = (a[bad] + 0.5 * width[bad]) % 360.0
+        new = strain_probes(state, params, mids, norm, allow_sliding)
+        res = ProbeResult.concat([res, new])
+        res = res.take(np.argsort(res.alpha_eps, kind="stable"))
+    return res
+
+
+class StressProbeResult(NamedTuple):
+    """Stress probes: for each asked alpha_sigma, the strain directions that give it.
+
+    alpha_sigma_target : (m,) [deg]; n_solutions : (m,) number of strain directions found (0: no
+    strain direction gives that stress direction, the response jumps over it; > 1: several do);
+    probe : ProbeResult of one solution per target (the first, by alpha_eps), rows of targets
+    without a solution are NaN; status : (m,) 'unique' | 'multiple' | 'none'.
+    """
+
+    alpha_sigma_target: np.ndarray
+    n_solutions: np.ndarray
+    probe: ProbeResult
+    status: np.ndarray
+    all_alpha_eps: list
+
+
+def stress_probes(state: HState, params: HParams, alpha_sigma_deg, sigma_norm: float | None = None,
+                  sweep: ProbeResult | None = None, tol_deg: float = 1e-6,
+                  allow_sliding: bool = True) -> StressProbeResult:
+    """Stress probes in the directions ``alpha_sigma_deg`` [deg] (paper's convention).
+
+    The strain direction is found by bisection on the response angle along the adaptive sweep
+    (the map is piecewise linear, continuous for a fixed pattern). With ``sigma_norm`` [Pa] the
+    strain norm is scaled so that |d_sigma| = sigma_norm (the probe is then run at that size).
+    """
+    _check_state(state)
+    targets = np.atleast_1d(np.asarray(alpha_sigma_deg, dtype=float)) % 360.0
+    if sweep is None:
+        sweep = directional_sweep(state, params, allow_sliding=allow_sliding)
+    a = sweep.alpha_eps
+    s = sweep.alpha_sigma
+    width = (np.roll(a, -1) - a) % 360.0
+    dgap = _wrap180(np.roll(s, -1) - s)
+    norm = float(_norm(sweep.d_eps[0]))
+    brackets = []   # (target index, lo alpha_eps, width, lo alpha_sigma, gap)
+    for ti, t in enumerate(targets):
+        off = _wrap180(t - s)
+        hit = np.where(dgap >= 0, (off >= 0) & (off <= dgap), (off <= 0) & (off >= dgap))
+        for k in np.flatnonzero(hit & (np.abs(dgap) < 180.0)):
+            brackets.append((ti, a[k], width[k]))
+    sols = [[] for _ in targets]
+    if brackets:
+        ti = np.array([b[0] for b in brackets])
+        lo = np.array([b[1] for b in brackets])
+        w = np.array([b[2] for b in brackets])
+        t = targets[ti]
+        s_lo = strain_probes(state, params, lo, norm, allow_sliding).alpha_sigma
+        for _ in range(60):
+            w = 0.5 * w
+            mid = (lo + w) % 360.0
+            s_mid = strain_probes(state, params, mid, norm, allow_sliding).alpha_sigma
+            # keep the half whose start is still on the low side of the target
+            go_up = _wrap180(t - s_lo) * _wrap180(t - s_mid) > 0
+            lo = np.where(go_up, mid, lo)
+            s_lo = np.where(go_up, s_mid, s_lo)
+        fin = strain_probes(state, params, lo, norm, allow_sliding)
+        ok = np.abs(_wrap180(fin.alpha_sigma - t)) <= max(tol_deg, 1e-9)
+        for k in np.flatnonzero(ok):
+            sols[ti[k]].append(lo[k])
+    n_sol = np.array([len(v) for v in sols])
+    first = np.array([min(v) if v else np.nan for v in sols])
+    status = np.where(n_sol == 0, "none", np.where(n_sol == 1, "unique", "multiple"))
+    have = np.isfinite(first)
+    res = None
+    if np.any(have):
+        base = strain_probes(state, params, first[have], norm, allow_sliding)
+        if sigma_norm is not None:
+            scale = float(sigma_norm) / _norm(base.d_sigma)
+            parts = [strain_probes(state, params, [ae], norm * sc, allow_sliding)
+                     for ae, sc in zip(first[have], scale)]
+            base = ProbeResult.concat(parts)
+        full = [np.full((targets.size,) + np.shape(f)[1:], np.nan) for f in base]
+        for f, b in zip(full, base):
+            f[have] = b
+        res = ProbeResult(*full)
+    else:
+        res = ProbeResult(*(np.full(targets.size, np.nan) for _ in ProbeResult._fields))
+    return StressProbeResult(targets, n_sol, res, status, sols)
+
+
+def min_w2(state: HState, params: HParams, n: int = 360, which: str = "w2",
+           sweep: ProbeResult | None = None) -> tuple[float, float]:
+    """Minimum over all strain directions of the normalized ``which`` ('w2' or 'w2_sigma') and
+    the response angle alpha_sigma [deg] where it occurs (adaptive sweep)."""
+    sweep = directional_sweep(state, params, n=n) if sweep is None else sweep
+    v = getattr(sweep, which)
+    k = int(np.nanargmin(v))
+    return float(v[k]), float(sweep.alpha_sigma[k])
+
+
+def tangent_criteria(state: HState, params: HParams, d_eps_dir=(1.0, -1.0),
+                     norm: float = DEFAULT_PROBE_NORM) -> dict:
+    """det(M) and det(M_sym) of the 2x2 principal tangent (d sigma1, d sigma2 vs d eps1, d eps2)
+    on the sliding pattern of the strain direction ``d_eps_dir`` (e.g. the path's loading
+    direction), Cauchy and Lagrangian. M_sym = (M + M^T)/2; det(M_sym) <= 0 is the first loss of
+    positive definiteness, det(M) = 0 the limit state (spec/hmodel.md)."""
+    _check_state(state)
+    d = np.asarray(d_eps_dir, dtype=float)
+    d = norm * d / np.linalg.norm(d)
+    inc = update_full(state, np.diag(d), params)
+    out = {}
+    for name, C in (("cauchy", inc.tangent), ("lagrangian", inc.tangent_lagrangian)):
+        M = np.array([[C[0, 0, 0, 0], C[0, 0, 1, 1]], [C[1, 1, 0, 0], C[1, 1, 1, 1]]])
+        Ms = 0.5 * (M + M.T)
+        out[f"det_M_{name}"] = float(np.linalg.det(M))
+        out[f"det_Msym_{name}"] = float(np.linalg.det(Ms))
+        out[f"lam_min_Msym_{name}"] = float(np.linalg.eigvalsh(Ms)[0])
+    return out

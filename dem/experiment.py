@@ -1,0 +1,187 @@
+"""The paper's drained biaxial test (section 4, Figs. 13-14) and its figures.
+
+Axis 1 = axial = y, axis 2 = lateral = x.  Compression positive; p = (s1+s2)/2, q = s1-s2,
+eta = q/p, eps_v = eps1 + eps2 (engineering strains from the wall positions).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from typing import NamedTuple
+
+import numpy as np
+
+from . import io
+from .params import DemParams
+from .sample import compact
+from .simulation import Simulation
+from .walls import biaxial
+
+COLUMNS = ["step", "time", "eps1", "eps2", "eps_v", "s1", "s2", "p", "q", "eta",
+           "s1_lw", "s2_lw", "unbalanced", "porosity", "coordination"]
+
+
+class BiaxialResult(NamedTuple):
+    rows: list
+    state_a_path: str | None
+    eta_a_reached: bool
+    compaction: dict
+    wall_time: float
+
+
+def record(sim: Simulation):
+    """One row of the biaxial CSV (see COLUMNS)."""
+    snap = sim.snapshot()
+    s2, s1 = sim.wall_stress(snap)
+    e2, e1 = sim.strain()
+    lw = sim.love_weber(snap)
+    p = 0.5 * (s1 + s2)
+    q = s1 - s2
+    coord = 2.0 * len(snap.ci) / sim.n
+    return [sim.step, sim.time, e1, e2, e1 + e2, s1, s2, p, q, q / p if p > 0 else 0.0,
+            lw[1, 1], lw[0, 0], sim.unbalanced(snap), sim.porosity(), coord]
+
+
+def _progress(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.029,
+                eps_max=0.10, post_peak_strain=0.02, record_strain=1e-4,
+                compaction_friction_deg=0.0, checkpoint_every=50, resume=False,
+                verbose=True, figures=True, vtk=True) -> BiaxialResult:
+    """Compact, then run the drained biaxial test past the peak.
+
+    Writes out_dir/biaxial.csv, out_dir/stateA.npz (first eta >= eta_a; if never reached,
+    the first state with eta >= 0.97 max(eta), flagged in out_dir/summary.json), figures fig13_q.png and
+    fig14_epsv.png, VTK snapshots at A, out_dir/checkpoint.npz (+ rows) every
+    `checkpoint_every` records so that `resume=True` continues an interrupted run.
+    rate: axial strain rate [1/s]; confining: lateral stress [Pa]; record_strain: axial
+    strain between CSV rows; the test stops at eps_max or post_peak_strain after the peak.
+    """
+    for name, val, ok, rng in (("rate", rate, rate > 0, "rate > 0 [1/s]"),
+                               ("confining", confining, confining > 0, "confining > 0 [Pa]"),
+                               ("eta_a", eta_a, eta_a > 0, "eta_a > 0"),
+                               ("eps_max", eps_max, 0 < eps_max < 0.5, "0 < eps_max < 0.5"),
+                               ("record_strain", record_strain, 0 < record_strain < eps_max,
+                                "0 < record_strain < eps_max")):
+        if not ok:
+            raise ValueError(f"{name}={val!r}; allowed range: {rng}")
+    t_start = time.time()
+    os.makedirs(out_dir, exist_ok=True)
+    ck_path = os.path.join(out_dir, "checkpoint.npz")
+    a_path = os.path.join(out_dir, "stateA.npz")
+    rows = []
+    info = {}
+    if resume and os.path.exists(ck_path):
+        st, info = io.load_state(ck_path)
+        sim = Simulation(st)
+        rows = info.pop("rows")
+        if verbose:
+            _progress(f"[biaxial] resumed from {ck_path} at step {sim.step}, {len(rows)} rows")
+    else:
+        t0 = time.time()
+        sim, rep = compact(params, stress=confining, friction_deg=compaction_friction_deg,
+                           verbose=verbose)
+        info["compaction"] = {"porosity": float(rep.porosity), "stress": list(rep.stress),
+                              "unbalanced": float(rep.unbalanced), "steps": int(rep.steps),
+                              "converged": bool(rep.converged), "wall_time": time.time() - t0}
+        io.save_state(os.path.join(out_dir, "compacted.npz"), sim.state(),
+                      meta={"compaction": info["compaction"]})
+        sim.ref_len = sim.size.copy()
+        sim.set_control(biaxial(confining, rate, sim.ref_len))
+        info.update(eta_a_reached=False, q_max=-1e300, eps_peak=0.0, eta_max=-1e300)
+        rows.append(record(sim))
+    rec_steps = max(1, int(round(record_strain / (rate * sim.dt))))
+    kept = {}
+    last_print = 0.0
+    t_loop = time.time()
+    step_loop = sim.step
+    while True:
+        sim.run(rec_steps)
+        row = record(sim)
+        rows.append(row)
+        e1, q, eta = row[2], row[8], row[9]
+        if q > info["q_max"]:
+            info["q_max"], info["eps_peak"] = q, e1
+        if not info["eta_a_reached"]:
+            if eta >= eta_a:
+                info["eta_a_reached"] = True
+                info["A"] = dict(zip(COLUMNS, row))
+                io.save_state(a_path, sim.state(), meta={"A": info["A"], "eta_a": eta_a})
+                if vtk:
+                    io.write_particles_vtk(os.path.join(out_dir, "particlesA.vtu"), sim)
+                    io.write_contacts_vtk(os.path.join(out_dir, "contactsA.vtu"), sim)
+                if verbose:
+                    _progress(f"[biaxial] point A: eta={eta:.4f} eps1={e1:.5f} -> {a_path}")
+            elif eta > info["eta_max"] and int(eta / 0.005) not in kept:
+                # first crossing of each 0.005-wide eta bin on the way up: fallback A
+                kept[int(eta / 0.005)] = (sim.state(), dict(zip(COLUMNS, row)))
+        info["eta_max"] = max(info["eta_max"], eta)
+        done = e1 >= eps_max or (e1 >= info["eps_peak"] + post_peak_strain and
+                                 q < 0.98 * info["q_max"])
+        now = time.time()
+        if verbose and (now - last_print > 2.0 or done):
+            last_print = now
+            sps = (sim.step - step_loop) * sim.n / max(now - t_loop, 1e-9)
+            _progress(f"[biaxial] step {sim.step} eps1={e1:.5f} q={q/1e3:.2f} kPa eta={eta:.4f} "
+                      f"eps_v={row[4]:.5f} unbalanced={row[12]:.1e} ({sps:.2e} particle-steps/s)")
+        if checkpoint_every and len(rows) % checkpoint_every == 0 and not done:
+            io.save_state(ck_path, sim.state(), meta=dict(info, rows=rows))
+            io.write_csv(os.path.join(out_dir, "biaxial.csv"), COLUMNS, rows)
+        if done:
+            break
+    if not info["eta_a_reached"]:
+        # "just before the peak": first kept state with eta >= 0.97 eta_max
+        cands = [v for v in kept.values() if v[1]["eta"] >= 0.97 * info["eta_max"]]
+        if cands and not os.path.exists(a_path):
+            st, rowd = min(cands, key=lambda v: v[1]["step"])
+            io.save_state(a_path, st, meta={"A": rowd, "eta_a": eta_a, "eta_a_reached": False})
+            info["A"] = rowd
+        if verbose:
+            _progress(f"[biaxial] WARNING: eta never reached {eta_a} (max {info['eta_max']:.4f});"
+                      f" stateA.npz holds the first state with eta >= 0.97 max eta "
+                      f"({info.get('A')})")
+    io.write_csv(os.path.join(out_dir, "biaxial.csv"), COLUMNS, rows)
+    wall = time.time() - t_start + info.get("wall_time_before", 0.0)
+    summary = {k: v for k, v in info.items() if k != "rows"}
+    summary.update(n=sim.n, rate=rate, confining=confining, eta_a=eta_a, dt=sim.dt,
+                   wall_time=wall, params=params.to_dict())
+    io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
+                          json.dumps(summary, indent=1, default=float).encode())
+    if figures:
+        plot_biaxial(rows, info.get("A"), out_dir)
+    if os.path.exists(ck_path):
+        os.unlink(ck_path)
+    return BiaxialResult(rows, a_path if os.path.exists(a_path) else None,
+                         info["eta_a_reached"], info.get("compaction", {}), wall)
+
+
+def plot_biaxial(rows, a_row, out_dir):
+    """Figs. 13 (q vs eps1) and 14 (eps_v vs eps1) as PNG, point A marked."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    arr = np.array([[r[2], r[4], r[8]] for r in rows])
+    for name, col, ylabel, scale in (("fig13_q.png", 2, "q = s1 - s2 [kPa]", 1e-3),
+                                     ("fig14_epsv.png", 1, "eps_v = eps1 + eps2 [%]", 100)):
+        fig, ax = plt.subplots(figsize=(5, 4))
+        ax.plot(arr[:, 0] * 100, arr[:, col] * scale, "-k", lw=1)
+        if a_row is not None:
+            yv = a_row["q"] if col == 2 else a_row["eps_v"]
+            ax.plot([a_row["eps1"] * 100], [yv * scale], "o", color="C3")
+            ax.annotate("A", (a_row["eps1"] * 100, yv * scale), textcoords="offset points",
+                        xytext=(5, 5), color="C3")
+        ax.set_xlabel("axial strain eps1 [%]")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        if col == 1:
+            ax.set_title("compression positive (eps_v < 0: dilation)", fontsize=8)
+        fig.tight_layout()
+        tmp = os.path.join(out_dir, ".tmp-" + name)
+        fig.savefig(tmp, dpi=120, format="png")
+        plt.close(fig)
+        os.replace(tmp, os.path.join(out_dir, name))

@@ -322,7 +322,8 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
     strain_controlled : (3,) bool; de_start : (3,) start increment (strain-controlled entries are
     the prescribed ones); target : (3,) stress [Pa] of the stress-controlled entries.
     Outputs (the ``o_*`` buffers) hold the accepted update. Returns (iterations, residual,
-    d_eps (1, 3)); iterations = -1 when Newton did not converge in ``max_iter``.
+    d_eps (1, 3)); iterations = -1 when Newton did not converge in ``max_iter``, -2 when the
+    tangent on the stress-controlled components is singular (e.g. every hexagon open).
     """
     nfree = 0
     free = np.empty(3, dtype=np.int64)
@@ -358,6 +359,9 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
             r[a] = o_sig[0, free[a]] - target[free[a]]
             for b in range(nfree):
                 J[a, b] = o_tan[0, free[a], free[b]]
+        jmax = np.max(np.abs(J))
+        if not (jmax > 0.0) or abs(np.linalg.det(J)) <= 1e-13 * jmax ** nfree:
+            return -2, rn, de        # no stiffness on the stress-controlled components
         step = np.linalg.solve(J, r)
         lam = 1.0
         trial = de.copy()
@@ -396,7 +400,8 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
     by the caller). Step k (1-based, from ``k_start`` + 1) targets sig_start + k d_sigma on the
     stress-controlled entries. Histories h_* get one row per step: strain increment (3,),
     stress (3,), Newton iterations, sliding and open counts. Returns the number of steps done
-    (fewer than ``n_steps`` when a step failed to converge) and the last residual."""
+    (fewer than ``n_steps`` when a step failed), the last residual and the failure code of
+    ``mixed_step_single`` (0 if none)."""
     ndir = d1.shape[1]
     out_h = [np.empty((1, ndir)) for _ in range(8)]
     o_sl = np.empty((1, ndir), dtype=np.bool_)
@@ -419,7 +424,7 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
                                        out_h[6], out_h[7], o_sl, o_op,
                                        o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
         if it < 0:
-            return k, rn
+            return k, rn, it
         d1[:, :] = out_h[0]; d2[:, :] = out_h[1]; alpha[:, :] = out_h[2]
         N1[:, :] = out_h[3]; T1[:, :] = out_h[4]; N2[:, :] = out_h[5]
         l1[:, :] = out_h[6]; l2[:, :] = out_h[7]; was_open[:, :] = o_op
@@ -439,4 +444,4 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
                 no += 1
         h_nsl[k] = ns
         h_nop[k] = no
-    return n_steps, rn
+    return n_steps, rn, 0

@@ -113,20 +113,16 @@ def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_targ
     it, rn, de_out = _kernels.mixed_step_single(
         *args[:-1], *_material_args(params), True, sc, de, target, tol, int(max_iter), *out)
     if it < 0:
-        raise MixedControlError(
-            f"mixed-control step did not converge in {max_iter} Newton iterations "
-            f"(last stress residual {rn:.3e} Pa, tolerance {tol:.3e} Pa); try a smaller step")
+        raise MixedControlError(_failure_message(it, max_iter, rn, tol))
     return increment_from_outputs(state, de_out, out), de_out[0].copy(), int(it)
 
 
-def _voigt_tangent(C):
-    """(2,2,2,2) tangent -> 3x3 d sigma_a / d v_b, v = (e11, e22, e12 tensor)."""
-    idx = ((0, 0), (1, 1), (0, 1))
-    T = np.empty((3, 3))
-    for a, (i, j) in enumerate(idx):
-        for b, (k, l) in enumerate(idx):
-            T[a, b] = C[i, j, k, l] + (C[i, j, l, k] if b == 2 else 0.0)
-    return T
+def _failure_message(code, max_iter, rn, tol):
+    if code == -2:
+        return (f"singular tangent on the stress-controlled components (no stiffness left, e.g. "
+                f"every hexagon open); stress residual {rn:.3e} Pa")
+    return (f"mixed-control step did not converge in {max_iter} Newton iterations (last stress "
+            f"residual {rn:.3e} Pa, tolerance {tol:.3e} Pa); try a smaller step")
 
 
 def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int,
@@ -170,7 +166,7 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
         m = min(int(chunk), n_steps - done)
         saved = [a.copy() for a in work] + [sliding.copy()]
         sl = slice(done, done + m)
-        n, rn = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, m, guess, tol,
+        n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, m, guess, tol,
                                      int(max_iter), h_de[sl], h_sig[sl], h_it[sl], h_nsl[sl],
                                      h_nop[sl], sliding)
         stop_at = None
@@ -183,7 +179,7 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
         if stop_at is not None and stop_at + 1 < n:
             work = saved[:-1]
             sliding = saved[-1]
-            n, rn = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, stop_at + 1,
+            n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, stop_at + 1,
                                          guess, tol, int(max_iter), h_de[sl], h_sig[sl], h_it[sl],
                                          h_nsl[sl], h_nop[sl], sliding)
         if n > 0:
@@ -192,7 +188,7 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
         if bar is not None:
             bar.update(done)
         if n < m and stop_at is None:
-            failed = (done + 1, rn)
+            failed = (done + 1, rn, code)
             break
         if stop_at is not None:
             break
@@ -201,10 +197,8 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
     result = _path_result(state, work, sliding, sig0, h_de[:done], h_sig[:done], h_it[:done],
                           h_nsl[:done], h_nop[:done])
     if failed is not None:
-        err = MixedControlError(
-            f"{label}: mixed-control step {failed[0]} did not converge in {max_iter} Newton "
-            f"iterations (last stress residual {failed[1]:.3e} Pa, tolerance {tol:.3e} Pa); "
-            f"try a smaller step")
+        err = MixedControlError(f"{label}, step {failed[0]}: "
+                                + _failure_message(failed[2], max_iter, failed[1], tol))
         err.partial = result
         raise err
     return result

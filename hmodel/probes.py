@@ -109,8 +109,11 @@ def strain_probes(state: HState, params: HParams, alpha_eps_deg, norm: float = D
     V = float(state.volume)
     dPi = to_voigt(inc.dPi)
     T3 = to_voigt(inc.T3)
-    tr = de[:, 0] + de[:, 1]
-    T2 = tr[:, None] * sigma[None, :]            # -(dV/V) sigma with dV = -V tr(d_eps)
+    # dV/V = -(I - eps)^-T : d_eps, the first-order change of V = V0 det(I - eps) (spec); it is
+    # -tr(d_eps) up to O(|eps|) terms (2 % at A), which matter for T2 to be the exact derivative
+    Ainv = np.linalg.inv(np.eye(2) - state.eps)
+    tr = Ainv[0, 0] * de[:, 0] + Ainv[1, 1] * de[:, 1] + (Ainv[0, 1] + Ainv[1, 0]) * de[:, 2]
+    T2 = tr[:, None] * sigma[None, :]            # -(dV/V) sigma
     d_sigma = dPi + T2 + T3
     W2 = V * _ddot(dPi, de)
     scale = V * _norm(dPi) * _norm(de)
@@ -188,8 +191,11 @@ def stress_probes(state: HState, params: HParams, alpha_sigma_deg, sigma_norm: f
     """Stress probes in the directions ``alpha_sigma_deg`` [deg] (paper's convention).
 
     The strain direction is found by bisection on the response angle along the adaptive sweep
-    (the map is piecewise linear, continuous for a fixed pattern). With ``sigma_norm`` [Pa] the
-    strain norm is scaled so that |d_sigma| = sigma_norm (the probe is then run at that size).
+    (the map is piecewise linear, continuous for a fixed pattern). These are rate (directional)
+    probes: the direction is found at the sweep's small strain norm. With ``sigma_norm`` [Pa] the
+    increments are scaled linearly to |d_sigma| = sigma_norm, which is what the rate response
+    gives; a finite probe of that size near the peak would need strains far beyond the tangent
+    regime (the plastic modulus vanishes there) and is a different, path-dependent question.
     """
     _check_state(state)
     targets = np.atleast_1d(np.asarray(alpha_sigma_deg, dtype=float)) % 360.0
@@ -233,10 +239,10 @@ def stress_probes(state: HState, params: HParams, alpha_sigma_deg, sigma_norm: f
     if np.any(have):
         base = strain_probes(state, params, first[have], norm, allow_sliding)
         if sigma_norm is not None:
-            scale = float(sigma_norm) / _norm(base.d_sigma)
-            parts = [strain_probes(state, params, [ae], norm * sc, allow_sliding)
-                     for ae, sc in zip(first[have], scale)]
-            base = ProbeResult.concat(parts)
+            # rate response, positively homogeneous: scale the small probe to the asked norm
+            c = float(sigma_norm) / _norm(base.d_sigma)
+            lin = {f: getattr(base, f) * c[:, None] for f in ("d_eps", "d_sigma", "d_sigma_step", "dPi", "T2", "T3")}
+            base = base._replace(W2=base.W2 * c * c, **lin)
         full = [np.full((targets.size,) + np.shape(f)[1:], np.nan) for f in base]
         for f, b in zip(full, base):
             f[have] = b

@@ -1,0 +1,54 @@
+"""Atomic file output: a file is either absent or complete, never half-written."""
+from __future__ import annotations
+
+import os
+import tempfile
+from contextlib import contextmanager
+
+import numpy as np
+
+__all__ = ["atomic_open", "write_csv", "save_figure", "read_csv"]
+
+
+@contextmanager
+def atomic_open(path, mode="w"):
+    """Open a temporary file beside ``path``; it replaces ``path`` only if the block succeeds."""
+    path = os.fspath(path)
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=d)
+    try:
+        with os.fdopen(fd, mode) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_csv(path, columns: dict, fmt: str = "%.10g"):
+    """Write equal-length 1D ``columns`` (name -> array) with a header row, atomically.
+    Booleans are written as 0/1."""
+    names = list(columns)
+    cols = [np.asarray(columns[k]) for k in names]
+    n = {len(c) for c in cols}
+    if len(n) != 1:
+        raise ValueError(f"columns of different lengths: { {k: len(c) for k, c in zip(names, cols)} }")
+    data = np.column_stack([c.astype(float) for c in cols]) if cols else np.empty((0, 0))
+    with atomic_open(path) as f:
+        np.savetxt(f, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
+
+
+def read_csv(path) -> dict:
+    """Read a CSV written by ``write_csv`` into name -> float array."""
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    return {k: np.atleast_1d(data[k]) for k in data.dtype.names}
+
+
+def save_figure(fig, path, dpi=130):
+    """Save a matplotlib figure as PNG atomically and close it."""
+    import matplotlib.pyplot as plt
+    with atomic_open(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=dpi, bbox_inches="tight")
+    plt.close(fig)

@@ -16,7 +16,7 @@ from numba import njit, prange
 
 
 def _update_impl(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
-                 cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding,
+                 cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                  o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
                  o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
     npts, ndir = d1.shape
@@ -214,42 +214,43 @@ def _update_impl(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
             t00 += w * (dS1_0 * cc + dS2_0 * ss); t01 += w * (dS1_1 * cc + dS2_1 * ss); t02 += w * (dS1_2 * cc + dS2_2 * ss)
             t10 += w * (dS1_0 * ss + dS2_0 * cc); t11 += w * (dS1_1 * ss + dS2_1 * cc); t12 += w * (dS1_2 * ss + dS2_2 * cc)
             t20 += w * (dS1_0 - dS2_0) * cs; t21 += w * (dS1_1 - dS2_1) * cs; t22 += w * (dS1_2 - dS2_2) * cs
-            # Lagrangian increment T1 = dPi: forces change at the start geometry (Eq. 32)
-            DN1 = nN1 - n1
-            DT1 = nT1 - t1
-            DN2 = nN2 - n2
-            DF2 = DN1 * sa + n1 * ca * da - DT1 * ca + t1 * sa * da
-            Df14 = f14 - f14_0
-            Df26 = f26 - f26_0
-            DP1 = 2.0 * DN2 + Df14
-            DP2 = 2.0 * DF2 + 2.0 * Df26
-            wA = w * DP1 * L1
-            wB = w * DP2 * L2
-            P0 += wA * cc + wB * ss
-            P1 += wA * ss + wB * cc
-            P2 += (wA - wB) * cs
-            dDF2_0 = dN1_0 * sa + n1 * ca * x30 - dT1_0 * ca + t1 * sa * x30
-            dDF2_1 = dN1_1 * sa + n1 * ca * x31 - dT1_1 * ca + t1 * sa * x31
-            dDF2_2 = dN1_2 * sa + n1 * ca * x32 - dT1_2 * ca + t1 * sa * x32
-            dA0 = w * (2.0 * dN2_0 + df14_0) * L1; dA1 = w * (2.0 * dN2_1 + df14_1) * L1; dA2 = w * (2.0 * dN2_2 + df14_2) * L1
-            dB0 = w * (2.0 * dDF2_0 + 2.0 * df26_0) * L2; dB1 = w * (2.0 * dDF2_1 + 2.0 * df26_1) * L2
-            dB2 = w * (2.0 * dDF2_2 + 2.0 * df26_2) * L2
-            L00 += dA0 * cc + dB0 * ss; L01 += dA1 * cc + dB1 * ss; L02 += dA2 * cc + dB2 * ss
-            L10 += dA0 * ss + dB0 * cc; L11 += dA1 * ss + dB1 * cc; L12 += dA2 * ss + dB2 * cc
-            L20 += (dA0 - dB0) * cs; L21 += (dA1 - dB1) * cs; L22 += (dA2 - dB2) * cs
-            # transport term T3: geometry changes at the start forces
-            F2_0 = n1 * sa - t1 * ca
-            wC = w * (2.0 * n2 + f14_0) * dl1
-            wD = w * (2.0 * F2_0 + 2.0 * f26_0) * dl2
-            q0 += wC * cc + wD * ss
-            q1 += wC * ss + wD * cc
-            q2 += (wC - wD) * cs
-            # micro second-order work (Eq. 36, compression-positive lengths) and its contact split
-            w2 += -w * (DP1 * dl1 + DP2 * dl2)
-            # contacts 1-2, 1-6, 4-3, 4-5 in their own frame (n_c, t_c) at the start:
-            # df = (-dN1 - T1 da) n_c + (dT1 - N1 da) t_c,  dl = dd1 n_c + d1 da t_c
-            w2n += w * (4.0 * (-DN1 - t1 * da) * dd1 - 2.0 * DN2 * dd2 - Df14 * dl1 - 2.0 * Df26 * dl2)
-            w2t += w * (4.0 * (DT1 - n1 * da) * D1 * da)
+            if extras:
+                # Lagrangian increment T1 = dPi: forces change at the start geometry (Eq. 32)
+                DN1 = nN1 - n1
+                DT1 = nT1 - t1
+                DN2 = nN2 - n2
+                DF2 = DN1 * sa + n1 * ca * da - DT1 * ca + t1 * sa * da
+                Df14 = f14 - f14_0
+                Df26 = f26 - f26_0
+                DP1 = 2.0 * DN2 + Df14
+                DP2 = 2.0 * DF2 + 2.0 * Df26
+                wA = w * DP1 * L1
+                wB = w * DP2 * L2
+                P0 += wA * cc + wB * ss
+                P1 += wA * ss + wB * cc
+                P2 += (wA - wB) * cs
+                dDF2_0 = dN1_0 * sa + n1 * ca * x30 - dT1_0 * ca + t1 * sa * x30
+                dDF2_1 = dN1_1 * sa + n1 * ca * x31 - dT1_1 * ca + t1 * sa * x31
+                dDF2_2 = dN1_2 * sa + n1 * ca * x32 - dT1_2 * ca + t1 * sa * x32
+                dA0 = w * (2.0 * dN2_0 + df14_0) * L1; dA1 = w * (2.0 * dN2_1 + df14_1) * L1; dA2 = w * (2.0 * dN2_2 + df14_2) * L1
+                dB0 = w * (2.0 * dDF2_0 + 2.0 * df26_0) * L2; dB1 = w * (2.0 * dDF2_1 + 2.0 * df26_1) * L2
+                dB2 = w * (2.0 * dDF2_2 + 2.0 * df26_2) * L2
+                L00 += dA0 * cc + dB0 * ss; L01 += dA1 * cc + dB1 * ss; L02 += dA2 * cc + dB2 * ss
+                L10 += dA0 * ss + dB0 * cc; L11 += dA1 * ss + dB1 * cc; L12 += dA2 * ss + dB2 * cc
+                L20 += (dA0 - dB0) * cs; L21 += (dA1 - dB1) * cs; L22 += (dA2 - dB2) * cs
+                # transport term T3: geometry changes at the start forces
+                F2_0 = n1 * sa - t1 * ca
+                wC = w * (2.0 * n2 + f14_0) * dl1
+                wD = w * (2.0 * F2_0 + 2.0 * f26_0) * dl2
+                q0 += wC * cc + wD * ss
+                q1 += wC * ss + wD * cc
+                q2 += (wC - wD) * cs
+                # micro second-order work (Eq. 36, compression-positive lengths) and its contact split
+                w2 += -w * (DP1 * dl1 + DP2 * dl2)
+                # contacts 1-2, 1-6, 4-3, 4-5 in their own frame (n_c, t_c) at the start:
+                # df = (-dN1 - T1 da) n_c + (dT1 - N1 da) t_c,  dl = dd1 n_c + d1 da t_c
+                w2n += w * (4.0 * (-DN1 - t1 * da) * dd1 - 2.0 * DN2 * dd2 - Df14 * dl1 - 2.0 * Df26 * dl2)
+                w2t += w * (4.0 * (DT1 - n1 * da) * D1 * da)
             o_d1[p, i] = nd1
             o_d2[p, i] = nd2
             o_alpha[p, i] = na
@@ -283,18 +284,29 @@ def _update_impl(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
         o_tan[p, 0, 0] = t00 / Vn - sg0 * k0; o_tan[p, 0, 1] = t01 / Vn - sg0 * k1; o_tan[p, 0, 2] = t02 / Vn - sg0 * k2
         o_tan[p, 1, 0] = t10 / Vn - sg1 * k0; o_tan[p, 1, 1] = t11 / Vn - sg1 * k1; o_tan[p, 1, 2] = t12 / Vn - sg1 * k2
         o_tan[p, 2, 0] = t20 / Vn - sg2 * k0; o_tan[p, 2, 1] = t21 / Vn - sg2 * k1; o_tan[p, 2, 2] = t22 / Vn - sg2 * k2
-        o_tanL[p, 0, 0] = L00 / V; o_tanL[p, 0, 1] = L01 / V; o_tanL[p, 0, 2] = L02 / V
-        o_tanL[p, 1, 0] = L10 / V; o_tanL[p, 1, 1] = L11 / V; o_tanL[p, 1, 2] = L12 / V
-        o_tanL[p, 2, 0] = L20 / V; o_tanL[p, 2, 1] = L21 / V; o_tanL[p, 2, 2] = L22 / V
-        o_dPi[p, 0] = P0 / V
-        o_dPi[p, 1] = P1 / V
-        o_dPi[p, 2] = P2 / V
-        o_T3[p, 0] = q0 / V
-        o_T3[p, 1] = q1 / V
-        o_T3[p, 2] = q2 / V
-        o_w2[p] = w2
-        o_w2n[p] = w2n
-        o_w2t[p] = w2t
+        if extras:
+            o_tanL[p, 0, 0] = L00 / V; o_tanL[p, 0, 1] = L01 / V; o_tanL[p, 0, 2] = L02 / V
+            o_tanL[p, 1, 0] = L10 / V; o_tanL[p, 1, 1] = L11 / V; o_tanL[p, 1, 2] = L12 / V
+            o_tanL[p, 2, 0] = L20 / V; o_tanL[p, 2, 1] = L21 / V; o_tanL[p, 2, 2] = L22 / V
+            o_dPi[p, 0] = P0 / V
+            o_dPi[p, 1] = P1 / V
+            o_dPi[p, 2] = P2 / V
+            o_T3[p, 0] = q0 / V
+            o_T3[p, 1] = q1 / V
+            o_T3[p, 2] = q2 / V
+            o_w2[p] = w2
+            o_w2n[p] = w2n
+            o_w2t[p] = w2t
+        else:
+            # not computed: NaN rather than a plausible-looking zero
+            for a_ in range(3):
+                o_dPi[p, a_] = np.nan
+                o_T3[p, a_] = np.nan
+                for b_ in range(3):
+                    o_tanL[p, a_, b_] = np.nan
+            o_w2[p] = np.nan
+            o_w2n[p] = np.nan
+            o_w2t[p] = np.nan
 
 
 update_serial = njit(cache=True, fastmath=False)(_update_impl)
@@ -313,7 +325,7 @@ def allocate_outputs(npts, ndir):
 
 @njit(cache=True)
 def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
-                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding,
+                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                       strain_controlled, de_start, target, tol, max_iter,
                       o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
@@ -342,7 +354,7 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
     b_dPi = np.empty((1, 3)); b_T3 = np.empty((1, 3))
     b_w2 = np.empty(1); b_w2n = np.empty(1); b_w2t = np.empty(1)
     update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
-                  cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding,
+                  cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                   o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
                   o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
     rn = 0.0
@@ -369,7 +381,7 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
             for a in range(nfree):
                 trial[0, free[a]] = de[0, free[a]] - lam * step[a]
             update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, trial,
-                          cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding,
+                          cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                           b_d1, b_d2, b_al, b_N1, b_T1, b_N2, b_l1, b_l2, b_sl, b_op,
                           b_sig, b_tan, b_tanL, b_dPi, b_T3, b_w2, b_w2n, b_w2t)
             rt = 0.0
@@ -418,7 +430,7 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
             if strain_controlled[c]:
                 de0[c] = d_eps[c]
         it, rn, de = mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
-                                       cos_t, sin_t, omega, kn, kt, mu, r_g, True,
+                                       cos_t, sin_t, omega, kn, kt, mu, r_g, True, False,
                                        strain_controlled, de0, target, tol, max_iter,
                                        out_h[0], out_h[1], out_h[2], out_h[3], out_h[4], out_h[5],
                                        out_h[6], out_h[7], o_sl, o_op,

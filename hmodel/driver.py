@@ -111,7 +111,7 @@ def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_targ
     args = kernel_args(state, params)
     out = _kernels.allocate_outputs(1, state.n_dir)
     it, rn, de_out = _kernels.mixed_step_single(
-        *args[:-1], *_material_args(params), True, sc, de, target, tol, int(max_iter), *out)
+        *args[:-1], *_material_args(params), True, True, sc, de, target, tol, int(max_iter), *out)
     if it < 0:
         raise MixedControlError(_failure_message(it, max_iter, rn, tol))
     return increment_from_outputs(state, de_out, out), de_out[0].copy(), int(it)

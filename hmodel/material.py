@@ -176,12 +176,14 @@ def take_points(state: HState, index) -> HState:
 
 # -- the update --------------------------------------------------------------------------------
 def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = True,
-                parallel: bool | None = None) -> Increment:
+                parallel: bool | None = None, extras: bool = True) -> Increment:
     """Advance every point by the strain increment ``d_eps`` (2, 2, *batch), compression positive.
 
     Only the symmetric part of ``d_eps`` acts (Eq. 16 sees n.de.n and t.de.t). The sliding /
     opening pattern is decided by this increment from ``state`` (return rule of spec/hmodel.md).
     ``allow_sliding=False`` gives the purely elastic response (the Coulomb cap off).
+    ``extras=False`` skips the Lagrangian tangent and increment, T3 and the micro sums (their
+    fields are then NaN): what ``update`` does, since the material contract needs none of them.
     """
     d_eps = np.asarray(d_eps, dtype=float)
     batch = state.batch_shape
@@ -198,7 +200,7 @@ def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = Tru
     if parallel is None:
         parallel = npts >= PARALLEL_MIN_POINTS
     kern = _kernels.update_parallel if parallel else _kernels.update_serial
-    kern(*args[:-1], de, *_material_args(params), bool(allow_sliding), *out)
+    kern(*args[:-1], de, *_material_args(params), bool(allow_sliding), bool(extras), *out)
     return increment_from_outputs(state, de, out)
 
 
@@ -246,5 +248,5 @@ def update(state: HState, d_eps, params: HParams):
     stress (2, 2, *batch) [Pa], tangent (2, 2, 2, 2, *batch) [Pa], both compression positive;
     ``state`` is left unchanged.
     """
-    inc = update_full(state, d_eps, params)
+    inc = update_full(state, d_eps, params, extras=False)
     return inc.stress, inc.tangent, inc.state

@@ -127,10 +127,10 @@ def _update_impl(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
                     c00 = a11 * a22 - a12 * a21
                     c01 = a12 * a20 - a10 * a22
                     c02 = a10 * a21 - a11 * a20
-                    det = a00 * c00 + a01 * c01 + a02 * c02
-                    i00 = c00 / det; i01 = (a02 * a21 - a01 * a22) / det; i02 = (a01 * a12 - a02 * a11) / det
-                    i10 = c01 / det; i11 = (a00 * a22 - a02 * a20) / det; i12 = (a02 * a10 - a00 * a12) / det
-                    i20 = c02 / det; i21 = (a01 * a20 - a00 * a21) / det; i22 = (a00 * a11 - a01 * a10) / det
+                    rdet = 1.0 / (a00 * c00 + a01 * c01 + a02 * c02)
+                    i00 = c00 * rdet; i01 = (a02 * a21 - a01 * a22) * rdet; i02 = (a01 * a12 - a02 * a11) * rdet
+                    i10 = c01 * rdet; i11 = (a00 * a22 - a02 * a20) * rdet; i12 = (a02 * a10 - a00 * a12) * rdet
+                    i20 = c02 * rdet; i21 = (a01 * a20 - a00 * a21) * rdet; i22 = (a00 * a11 - a01 * a10) * rdet
                     dd1 = i00 * dl1 + i01 * dl2 + i02 * b2
                     dd2 = i10 * dl1 + i11 * dl2 + i12 * b2
                     da = i20 * dl1 + i21 * dl2 + i22 * b2

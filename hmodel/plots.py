@@ -57,7 +57,7 @@ def fig_epsv_eps1(curves, path, point_a=None, title="Drained biaxial test: volum
 
 def fig_probes(pr, path):
     """Fig. 3: strain probes and their stress responses (elastic / plastic)."""
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4.6))
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10.5, 4.8), constrained_layout=True)
     pl = np.asarray(pr.plastic, bool)
     de = pr.d_eps / np.linalg.norm(pr.d_eps[:, :2], axis=1)[:, None]
     ds = pr.d_sigma / 1e3

@@ -1,0 +1,298 @@
+"""The FE biaxial test end to end: build the specimen, step it, check bifurcation, write outputs.
+
+``run_biaxial(BiaxialConfig(...), out_dir)`` is what ``python -m fem biaxial`` calls. Outputs in
+``out_dir``: curve.csv (a row per converged step, row 0 = initial state), fields.xdmf + fields.h5,
+newton.log (residual norms of every iterate), curve.png and summary.json (written at the end).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, asdict, field
+from pathlib import Path
+
+import numpy as np
+
+from hmodel import HParams
+from .adapter import stress_to_model, strain_to_model
+from .indicators import global_indicators, global_w2, local_indicators
+from .mesh import rectangle, from_file
+from .output import (CurveWriter, FieldWriter, plot_curve, read_curve, first_events,
+                     atomic_write_bytes)
+from .problem import Biaxial, Imperfection
+from .reference import material_point_curve
+from .solver import LoadStepper
+
+__all__ = ["BiaxialConfig", "build_problem", "run_biaxial", "RunResult"]
+
+
+@dataclass
+class BiaxialConfig:
+    """Every option of a biaxial run (SI units, angles in degrees, compression positive).
+
+    width, height [m]; nx, ny cells; mesh_kind "quad" | "tri"; mesh_file (meshio-readable,
+    overrides the generated mesh); eps1_max final axial strain; d_eps1 nominal step; material
+    parameters (sigma2 is the confining pressure = the material's p0); imperfection None |
+    "spot" | "band" with imp_size (fraction of the width), imp_phi_g, imp_alpha0 (weak values),
+    imp_angle (band) [deg]; Newton rtol / max_iter / max_cutbacks; fields: write fields.xdmf;
+    n_sphere: strain directions sampled for the local minimum of the normalized W2.
+    """
+
+    width: float = 0.05
+    height: float = 0.1
+    nx: int = 10
+    ny: int = 20
+    mesh_kind: str = "quad"
+    mesh_file: str | None = None
+    eps1_max: float = 0.025
+    d_eps1: float = 1e-4
+    kn: float = 1.0e6
+    kt: float = 0.5e6
+    phi_g: float = 20.0
+    alpha0: float = 42.8
+    r_g: float = 1.0e-3
+    n_dir: int = 180
+    sigma2: float = 200.0e3
+    imperfection: str | None = None
+    imp_size: float = 0.1
+    imp_phi_g: float | None = 18.0
+    imp_alpha0: float | None = None
+    imp_angle: float = 45.0
+    rtol: float = 1e-10
+    max_iter: int = 25
+    max_cutbacks: int = 6
+    fields: bool = True
+    n_sphere: int = 600
+    mp_reference: bool = True
+
+    def params(self) -> HParams:
+        return HParams(kn=self.kn, kt=self.kt, phi_g=self.phi_g, alpha0=self.alpha0, r_g=self.r_g,
+                       p0=self.sigma2, n_dir=self.n_dir)
+
+
+def build_problem(cfg: BiaxialConfig) -> Biaxial:
+    """Mesh + material + boundary conditions of ``cfg`` (validates every option)."""
+    params = cfg.params()
+    if cfg.mesh_file:
+        mesh = from_file(cfg.mesh_file)
+    else:
+        mesh = rectangle(cfg.width, cfg.height, cfg.nx, cfg.ny, cfg.mesh_kind)
+    imp = None
+    if cfg.imperfection not in (None, "", "none"):
+        imp = Imperfection(kind=cfg.imperfection, size=cfg.imp_size, phi_g=cfg.imp_phi_g,
+                           alpha0=cfg.imp_alpha0, angle=cfg.imp_angle)
+    return Biaxial(mesh, params, imperfection=imp)
+
+
+@dataclass
+class RunResult:
+    curve: dict
+    events: dict
+    summary: dict
+    timings: dict
+    out_dir: Path | None = None
+    problem: object = None
+    steps: list = field(default_factory=list)
+
+
+def _cells(prob):
+    kind = "quad" if prob.mesh.t.shape[0] == 4 else "triangle"
+    return [(kind, np.ascontiguousarray(prob.mesh.t.T))]
+
+
+def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphere, t_start):
+    """One CSV row and the field data of a converged state."""
+    mat = prob.material
+    s_m = stress_to_model(trial.sigma)                       # (2, 2, P) compression +
+    s1 = -prob.platen_force(f_int) / prob.width
+    s2 = float(prob.volume_average(s_m[1, 1]))
+    q, p = s1 - s2, 0.5 * (s1 + s2)
+    K = prob.stiffness(trial.D)
+    g = global_indicators(K, prob)
+    df_int = info["df_int"]
+    df_ext = np.zeros_like(df_int)        # reactions on prescribed dofs; f_lat is a dead load
+    df_ext[prob.prescribed] = df_int[prob.prescribed]
+    w2 = global_w2(info["du"], df_int, df_ext)
+    loc = local_indicators(trial.D, n_sphere=n_sphere)
+    eps_fe = prob.strain(stepper.u)
+    row = dict(step=stepper.step, eps1=stepper.eps1, s1=s1, s2=s2, q=q, p=p, eta=q / p,
+               newton_iters=info.get("iters", 0), cutbacks=info.get("cutbacks", 0),
+               d_eps1=info.get("d_eps1", 0.0), final_residual=info.get("residual", 0.0),
+               min_det_D=loc["det_D"].min(), min_det_Ds=loc["det_Ds"].min(),
+               min_lam_Ds=loc["lam_min_Ds"].min(), min_w2_local=loc["w2_min"].min(),
+               min_rice=loc["rice_min"].min(),
+               n_pts_w2_neg=int(np.count_nonzero(loc["w2_min"] <= 0)),
+               n_pts_rice_neg=int(np.count_nonzero(loc["rice_min"] <= 0)),
+               sliding_fraction=float(prob.volume_average(trial.sliding)),
+               open_fraction=float(prob.volume_average(trial.opened)),
+               eps2_mean=float(prob.volume_average(strain_to_model(eps_fe)[1, 1])),
+               time_s=time.perf_counter() - t_start, **g, **w2)
+    # fields: displacement at nodes; element means of stress / strain, element minima of indicators
+    nd = np.asarray(prob.basis.nodal_dofs)
+    disp = np.zeros((prob.mesh.p.shape[1], 3))
+    disp[:, 0], disp[:, 1] = stepper.u[nd[0]], stepper.u[nd[1]]
+    voigt = lambda t: np.stack([prob.per_element(t[0, 0]), prob.per_element(t[1, 1]),
+                                prob.per_element(0.5 * (t[0, 1] + t[1, 0]))], axis=1)
+    cell = {"stress": voigt(trial.sigma), "strain": voigt(eps_fe),
+            "q": prob.per_element(s_m[0, 0] - s_m[1, 1]),
+            "p": prob.per_element(0.5 * (s_m[0, 0] + s_m[1, 1])),
+            "sliding_fraction": prob.per_element(trial.sliding),
+            "open_fraction": prob.per_element(trial.opened)}
+    for k in ("det_D", "det_Ds", "lam_min_Ds", "w2_min", "rice_min"):
+        cell[k] = prob.per_element(loc[k], how="min")
+    weak = np.zeros(prob.nel)
+    weak[prob.weak_elements] = 1.0
+    cell["weak"] = weak
+    return row, {"displacement": disp}, {k: [np.ascontiguousarray(v, dtype=float)] for k, v in cell.items()}
+
+
+EVENT_LABELS = {
+    "lam_min_ks": "global lam_min(K_s) <= 0, platen displacement-controlled",
+    "det_k": "global det K sign change, platen displacement-controlled",
+    "lam_min_ks_f": "global lam_min(K_s) <= 0, platen force-controlled",
+    "det_k_f": "global det K sign change, platen force-controlled (limit point)",
+    "local_lam_Ds": "local: lam_min(D_s) <= 0 at some point",
+    "local_w2": "local: sampled min normalized W2 <= 0 at some point",
+    "local_rice": "local: Rice min det(n.D.n) <= 0 at some point",
+    "fe_peak": "FE specimen: peak of q",
+}
+
+
+def summarize(curve: dict, mp: dict | None) -> tuple[dict, dict]:
+    """(events: name -> row index, summary dict) for the curve columns."""
+    ev = first_events(curve)
+    for key, col in (("local_lam_Ds", "min_lam_Ds"), ("local_w2", "min_w2_local"),
+                     ("local_rice", "min_rice")):
+        k = np.flatnonzero(curve[col] <= 0)
+        if k.size:
+            ev[key] = int(k[0])
+    kq = int(np.argmax(curve["q"]))
+    if kq < len(curve["q"]) - 1:
+        ev["fe_peak"] = kq
+    summ = {"events": {}, "material_point": None}
+    for key, label in EVENT_LABELS.items():
+        if key in ev:
+            k = ev[key]
+            summ["events"][key] = {"label": label, "row": k, "step": int(curve["step"][k]),
+                                   "eps1": float(curve["eps1"][k]), "eta": float(curve["eta"][k]),
+                                   "q": float(curve["q"][k])}
+        else:
+            summ["events"][key] = {"label": label, "row": None}
+    if mp is not None:
+        summ["material_point"] = {"eps1_peak": mp["eps1_peak"], "eta_peak": mp["eta_peak"],
+                                  "q_peak": mp["q_peak"], "peak_reached": bool(mp["peak_is_interior"])}
+    return ev, summ
+
+
+def format_summary(summ: dict) -> str:
+    lines = ["criterion                                                       eps1 [%]    eta"]
+    for key, e in summ["events"].items():
+        if e["row"] is None:
+            lines.append(f"  {e['label']:<60s}  not reached")
+        else:
+            lines.append(f"  {e['label']:<60s} {100 * e['eps1']:8.4f}  {e['eta']:.4f}")
+    mp = summ["material_point"]
+    if mp is not None:
+        tag = "" if mp["peak_reached"] else " (not reached: end of the computed range)"
+        lines.append(f"  {'material point (hmodel.driver, d_eps1 = 1e-5): peak of q':<60s} "
+                     f"{100 * mp['eps1_peak']:8.4f}  {mp['eta_peak']:.4f}{tag}")
+    return "\n".join(lines)
+
+
+def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
+    """Run the biaxial test of ``cfg``. With ``out_dir`` write the outputs there as the steps
+    converge; ``progress`` is a callable taking one line of text (None: silent).
+
+    A step that fails after every cut-back raises RuntimeError; the converged steps are on disk.
+    """
+    t_start = time.perf_counter()
+    prob = build_problem(cfg)
+    stepper = LoadStepper(prob, cfg.d_eps1, rtol=cfg.rtol, max_iter=cfg.max_iter,
+                          max_cutbacks=cfg.max_cutbacks)
+    if not (np.isfinite(cfg.eps1_max) and 0 < cfg.eps1_max < 0.5):
+        raise ValueError(f"eps1_max = {cfg.eps1_max!r} is out of range: allowed 0 < eps1_max < 0.5")
+    out = Path(out_dir) if out_dir is not None else None
+    writer = fields = logf = None
+    rows = []
+    t_ind = [0.0]
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        writer = CurveWriter(out / "curve.csv")
+        logf = open(out / "newton.log", "w")
+        logf.write("# step d_eps1 | normalized residual |r|/(sigma2 H) of each iterate | "
+                   "hexagon flags switched between iterates\n")
+        if cfg.fields:
+            fields = FieldWriter(out / "fields.xdmf", prob.mesh.p.T, _cells(prob))
+
+    def log(msg):
+        if logf is not None:
+            logf.write(msg + "\n")
+            logf.flush()
+        if progress is not None:
+            progress(msg)
+
+    stepper.log = log
+
+    def emit(trial, f_int, info):
+        t0 = time.perf_counter()
+        row, pdata, cdata = _step_record(prob, stepper, trial, f_int, info, cfg.n_sphere, t_start)
+        rows.append(row)
+        if writer is not None:
+            writer.write(row)
+        if fields is not None:
+            fields.write(row["eps1"], pdata, cdata)
+        t_ind[0] += time.perf_counter() - t0
+        if progress is not None:
+            progress(f"step {row['step']:4d} eps1 = {100 * row['eps1']:7.4f} % q = {row['q'] / 1e3:9.3f} kPa "
+                     f"eta = {row['eta']:.4f} it = {row['newton_iters']} cut = {row['cutbacks']} "
+                     f"detK = {row['det_k_sign']:+d}/{row['det_k_sign_f']:+d} "
+                     f"lam(Ks) = {row['lam_min_ks']:.3e}/{row['lam_min_ks_f']:.3e} "
+                     f"W2 = {row['w2_global']:+.3f} slide = {row['sliding_fraction']:.3f} "
+                     f"t = {row['time_s']:.1f} s")
+
+    steps = []
+
+    def on_step(res, info):
+        info = dict(info, iters=res.iterations, residual=res.residuals[-1])
+        steps.append({"residuals": res.residuals, "pattern_changes": res.pattern_changes})
+        if logf is not None:
+            logf.write(f"{stepper.step} {info['d_eps1']:.3e} | "
+                       + " ".join(f"{r:.3e}" for r in res.residuals) + " | "
+                       + " ".join(str(c) for c in res.pattern_changes) + "\n")
+            logf.flush()
+        emit(res.trial, res.f_int, info)
+
+    # row 0: the isotropic initial state, tangent of a zero increment
+    trial0 = prob.material.trial(np.zeros((2, 2, prob.npts)))
+    zero = np.zeros(prob.ndofs)
+    emit(trial0, stepper.f_int, {"du": zero, "df_int": zero})
+    error = None
+    try:
+        stepper.run(cfg.eps1_max, on_step)
+    except RuntimeError as e:
+        error = e
+        log(f"FAILED: {e}")
+    finally:
+        if writer is not None:
+            writer.close()
+        if fields is not None:
+            fields.close()
+    curve = {k: np.array([r.get(k, np.nan) for r in rows], dtype=float) for k in rows[0]}
+    mp = material_point_curve(prob.params, max(cfg.eps1_max, 1e-4)) if cfg.mp_reference else None
+    events, summ = summarize(curve, mp)
+    timings = dict(stepper.times, total=time.perf_counter() - t_start, indicators_output=t_ind[0],
+                   steps=stepper.step, points=prob.npts, n_dir=prob.params.n_dir)
+    summ["timings"] = timings
+    summ["config"] = asdict(cfg)
+    summ["completed"] = error is None
+    if out is not None:
+        plot_curve(out / "curve.png", curve, mp,
+                   title=f"{prob.nel} elements, {prob.npts} points, n_dir = {prob.params.n_dir}")
+        atomic_write_bytes(out / "summary.json", json.dumps(summ, indent=1, default=float).encode())
+        logf.close()
+    result = RunResult(curve, events, summ, timings, out, prob, steps)
+    if error is not None:
+        error.result = result
+        raise error
+    return result

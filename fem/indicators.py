@@ -1,0 +1,220 @@
+"""Bifurcation indicators: global (condensed stiffness) and local (tangent at each point).
+
+Global, on the condensed tangent stiffness K (free dofs) and K_s = (K + K^T)/2:
+- sign of det K from a sparse LU, P_r K P_c = L U (SuperLU, unit-diagonal L):
+  sign det K = prod sign(U_ii) * parity(perm_r) * parity(perm_c);
+- inertia of K_s (number of negative eigenvalues) from a symmetric-mode LU without row pivoting
+  (P^T K_s P = L D L^T, Sylvester's law of inertia), checked to have kept the symmetric permutation;
+- smallest eigenvalue of K_s: ARPACK shift-invert (eigsh) at a shift sigma that the inertia of
+  K_s - sigma I proves to lie below the whole spectrum, so the eigenvalue nearest the shift is
+  the smallest one (not merely the one nearest zero).
+
+Local, at every quadrature point, from the tangent D (2, 2, 2, 2, npts) in the orthonormal Mandel
+basis (e11, e22, sqrt(2) e12), where eps : D : eps = x . D_M x:
+- det D_M, det of its symmetric part, its smallest eigenvalue lam_min(D_s) (exact);
+- min over unit strain directions x of the normalized second-order work x.D x / (|D x| |x|)
+  (Fibonacci sampling of the unit sphere of Mandel strain directions, then a finer local
+  resampling around the best direction); its sign agrees with lam_min(D_s) up to sampling;
+- Rice's indicator min over unit n of det(A(n)), A_jk = n_i D_ijkl n_l (acoustic tensor), sampled
+  over n at angles in [0, pi).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+__all__ = ["permutation_parity", "det_sign", "symmetric_inertia", "lam_min_sym",
+           "global_indicators", "mandel", "local_indicators", "fibonacci_sphere"]
+
+
+def permutation_parity(perm: np.ndarray) -> int:
+    """+1 for an even permutation (array of images of 0..n-1), -1 for an odd one."""
+    perm = np.asarray(perm)
+    n = perm.size
+    seen = np.zeros(n, dtype=bool)
+    cycles = 0
+    for i in range(n):
+        if not seen[i]:
+            cycles += 1
+            j = i
+            while not seen[j]:
+                seen[j] = True
+                j = perm[j]
+    return 1 if (n - cycles) % 2 == 0 else -1
+
+
+def det_sign(A) -> tuple[int, float]:
+    """(sign of det A, log10 |det A|) of a sparse square matrix; (0, -inf) if exactly singular."""
+    try:
+        lu = spla.splu(sp.csc_matrix(A))
+    except RuntimeError:          # "Factor is exactly singular"
+        return 0, -np.inf
+    d = lu.U.diagonal()
+    if np.any(d == 0):
+        return 0, -np.inf
+    s = int(np.prod(np.sign(d))) * permutation_parity(lu.perm_r) * permutation_parity(lu.perm_c)
+    return s, float(np.sum(np.log10(np.abs(d))))
+
+
+def symmetric_inertia(S) -> int:
+    """Number of negative eigenvalues of a sparse symmetric matrix, or -1 if the symmetric-mode
+    LU had to pivot off the diagonal (then the diagonal of U is not an inertia certificate)."""
+    try:
+        lu = spla.splu(sp.csc_matrix(S), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options=dict(SymmetricMode=True))
+    except RuntimeError:
+        return -1
+    if not np.array_equal(lu.perm_r, lu.perm_c):
+        return -1
+    d = lu.U.diagonal()
+    if np.any(d == 0) or not np.all(np.isfinite(d)):
+        return -1
+    return int(np.count_nonzero(d < 0))
+
+
+def lam_min_sym(S, rel_shift: float = 1e-7) -> tuple[float, int]:
+    """(smallest eigenvalue, number of negative eigenvalues or -1) of a sparse symmetric S.
+
+    The shift starts at -rel_shift * mean|diag S| and is pushed down until S - sigma I has no
+    negative pivot: then every eigenvalue is above sigma and shift-invert finds the smallest.
+    """
+    S = sp.csc_matrix(S)
+    n = S.shape[0]
+    n_neg = symmetric_inertia(S)
+    scale = float(np.mean(np.abs(S.diagonal()))) or 1.0
+    if n <= 3:   # ARPACK needs k < n; tiny problems (one element) are solved densely
+        return float(np.linalg.eigvalsh(S.toarray())[0]), n_neg
+    sigma = -rel_shift * scale
+    eye = sp.identity(n, format="csc")
+    certified = False
+    for _ in range(40):
+        k = symmetric_inertia(S - sigma * eye)
+        if k == 0:
+            certified = True
+            break
+        if k < 0:
+            break
+        sigma = 4.0 * sigma
+    try:
+        if certified:
+            w = spla.eigsh(S, k=1, sigma=sigma, which="LM", return_eigenvectors=False, tol=1e-10)
+        else:   # no certificate: take the lowest of a few eigenvalues nearest the shift
+            w = spla.eigsh(S, k=min(6, n - 1), sigma=sigma, which="LM", return_eigenvectors=False,
+                           tol=1e-10)
+        return float(np.min(w)), n_neg
+    except (spla.ArpackNoConvergence, RuntimeError):
+        return float("nan"), n_neg
+
+
+def global_indicators(K, problem) -> dict:
+    """Indicators of the full stiffness K (ndofs, ndofs) condensed two ways.
+
+    Displacement-controlled platen (the applied BCs, suffix none): free = problem.free.
+    Force-controlled platen (suffix ``_f``): the top u_y tied into one extra free dof, K_f = T^T K T;
+    det K_f changes sign at the limit point of the load (the peak of the platen force).
+    """
+    K = sp.csr_matrix(K)
+    out = {}
+    Kd = K[problem.free][:, problem.free]
+    T = problem.T_platen
+    Kf = (T.T @ K @ T).tocsr()
+    for suffix, A in (("", Kd), ("_f", Kf)):
+        s, logdet = det_sign(A)
+        lam, n_neg = lam_min_sym(0.5 * (A + A.T))
+        out["det_k_sign" + suffix] = s
+        out["log10_abs_det_k" + suffix] = logdet
+        out["lam_min_ks" + suffix] = lam
+        out["n_neg_ks" + suffix] = n_neg
+    return out
+
+
+def global_w2(du: np.ndarray, df_int: np.ndarray, df_ext: np.ndarray) -> dict:
+    """Second-order work of a converged increment: du . dF_int and dF_ext . du [J/m] and their
+    normalized forms (divided by |du| |dF|, in [-1, 1])."""
+    out = {}
+    nu = np.linalg.norm(du)
+    for name, df in (("w2_global", df_int), ("w2_ext", df_ext)):
+        w = float(du @ df)
+        nf = np.linalg.norm(df)
+        out[name + "_raw"] = w
+        out[name] = w / (nu * nf) if nu > 0 and nf > 0 else 0.0
+    return out
+
+
+# -- local ------------------------------------------------------------------------------------
+_R2 = np.sqrt(2.0)
+_MIDX = ((0, 0), (1, 1), (0, 1))
+_MW = (1.0, 1.0, _R2)
+
+
+def mandel(D: np.ndarray) -> np.ndarray:
+    """(2, 2, 2, 2, *batch) tangent with minor symmetries -> (3, 3, *batch) Mandel matrix."""
+    M = np.empty((3, 3) + D.shape[4:])
+    for a, (i, j) in enumerate(_MIDX):
+        for b, (k, l) in enumerate(_MIDX):
+            M[a, b] = _MW[a] * _MW[b] * D[i, j, k, l]
+    return M
+
+
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """(n, 3) quasi-uniform unit vectors on the upper half sphere (z >= 0): x and -x give the same
+    normalized second-order work, so the half sphere covers every direction."""
+    i = np.arange(n) + 0.5
+    z = i / n                                   # uniform in (0, 1): equal-area on the half sphere
+    r = np.sqrt(1.0 - z ** 2)
+    phi = np.pi * (1.0 + 5.0 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def _w2n(M: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Normalized W2 for points (P, 3, 3) and directions (P or 1, N, 3) -> (P, N)."""
+    DX = np.einsum("pab,pnb->pna", M, X)
+    num = np.einsum("pna,pna->pn", X, DX)
+    den = np.linalg.norm(DX, axis=-1) * np.linalg.norm(X, axis=-1)
+    return num / np.where(den > 0, den, 1.0)
+
+
+def local_indicators(D: np.ndarray, n_sphere: int = 1500, n_angles: int = 360,
+                     chunk: int = 512) -> dict:
+    """Local indicators of tangents D (2, 2, 2, 2, npts) [Pa]; every output has shape (npts,).
+
+    det_D [Pa^3], det_Ds [Pa^3], lam_min_Ds [Pa], w2_min [-] (min normalized W2 over strain
+    directions), rice_min [Pa^2] (min over n of det of the acoustic tensor), rice_angle [deg]
+    (the angle of the minimizing n from the x axis).
+    """
+    npts = D.shape[-1]
+    M = np.moveaxis(mandel(D), -1, 0)                    # (P, 3, 3)
+    Ms = 0.5 * (M + np.swapaxes(M, 1, 2))
+    out = {"det_D": np.linalg.det(M), "det_Ds": np.linalg.det(Ms),
+           "lam_min_Ds": np.linalg.eigvalsh(Ms)[:, 0]}
+    X = fibonacci_sphere(n_sphere)[None]                 # (1, N, 3)
+    spacing = np.sqrt(2.0 * np.pi / n_sphere)            # typical angular gap [rad]
+    w2 = np.empty(npts)
+    for s in range(0, npts, chunk):
+        m = M[s:s + chunk]
+        vals = _w2n(m, X)                                # (p, N)
+        best = X[0, np.argmin(vals, axis=1)]             # (p, 3)
+        # finer local resampling around the best sampled direction (two rings of tangent offsets)
+        t1 = np.cross(best, np.array([0.0, 0.0, 1.0]))
+        t1 = np.where(np.linalg.norm(t1, axis=1, keepdims=True) < 1e-8,
+                      np.cross(best, np.array([1.0, 0.0, 0.0])), t1)
+        t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+        t2 = np.cross(best, t1)
+        ang = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+        offs = [0.0] + [spacing * f for f in (0.25, 0.5, 0.75, 1.0)]
+        cand = [best[:, None, :]]
+        for o in offs[1:]:
+            d = (np.cos(ang)[None, :, None] * t1[:, None, :] + np.sin(ang)[None, :, None] * t2[:, None, :])
+            cand.append(best[:, None, :] + o * d)
+        Y = np.concatenate(cand, axis=1)
+        w2[s:s + chunk] = np.minimum(vals.min(axis=1), _w2n(m, Y).min(axis=1))
+    out["w2_min"] = w2
+    th = np.linspace(0.0, np.pi, n_angles, endpoint=False)
+    n = np.stack([np.cos(th), np.sin(th)])               # (2, A)
+    A = np.einsum("ia,ijklp,la->pajk", n, D, n, optimize=True)   # (P, A, 2, 2)
+    detA = A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+    k = np.argmin(detA, axis=1)
+    out["rice_min"] = detA[np.arange(npts), k]
+    out["rice_angle"] = np.degrees(th[k])
+    return out

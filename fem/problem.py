@@ -1,0 +1,221 @@
+"""The plane-strain biaxial boundary-value problem: kinematics, boundary conditions, assembly.
+
+Small strain, tension positive, per unit out-of-plane thickness (forces in N/m, stiffness in Pa).
+Discretization: skfem vector Lagrange elements (bilinear quads, 2x2 Gauss points by default, or
+linear triangles with one point). The symmetric gradients of the basis functions are precomputed
+once ("B-matrices", with skfem's ``Basis.dx`` weights), so that the Newton loop works on plain
+arrays: strain = B u, f_int = sum B^T sigma dx, K = sum B^T D B dx (scipy.sparse).
+
+Boundary conditions (spec/fem.md):
+- bottom face y = ymin on rollers: u_y = 0 at every bottom node, u_x = 0 at the one bottom node
+  nearest the middle (no rigid translation, no bias to one side);
+- top face y = ymax: smooth rigid platen, u_y = -delta at every top node (driven), u_x free;
+- lateral faces x = xmin, xmax: constant confining pressure sigma2 on the INITIAL faces
+  (dead load, f_lat computed once). With small strain and Cauchy stresses read as
+  reference-configuration stresses, this is the choice under which the perfect specimen
+  reproduces the material point exactly (the material point holds its Cauchy s22 = sigma2).
+The initial state is the isotropic state p0 = sigma2 of the material, uniform, so the initial
+residual vanishes: the specimen starts in equilibrium with the confining pressure.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import skfem
+from skfem import Basis, FacetBasis, ElementVector, LinearForm
+from skfem.helpers import dot
+
+from hmodel import HParams
+from .adapter import MaterialField
+
+__all__ = ["Imperfection", "Biaxial"]
+
+
+@dataclass(frozen=True)
+class Imperfection:
+    """A weaker zone: every quadrature point of the elements whose centroid lies in it gets the
+    modified parameters (phi_g [deg] and/or alpha0 [deg]; None keeps the specimen's value).
+
+    kind : "spot" (a disk of radius ``size`` * width centred at (x, y) given as fractions of the
+    width and height; default on the left face at mid-height so the band can choose its own
+    orientation) or "band" (a strip of half-width ``size`` * width through the centre of the
+    specimen at ``angle`` [deg] from the horizontal).
+    """
+
+    kind: str = "spot"
+    size: float = 0.1
+    phi_g: float | None = 18.0
+    alpha0: float | None = None
+    x: float = 0.0
+    y: float = 0.5
+    angle: float = 45.0
+
+    def __post_init__(self):
+        if self.kind not in ("spot", "band"):
+            raise ValueError(f"Imperfection.kind {self.kind!r} is not allowed: allowed 'spot' or 'band'")
+        if not (np.isfinite(self.size) and self.size > 0):
+            raise ValueError(f"Imperfection.size = {self.size!r} is out of range: allowed size > 0 "
+                             "(fraction of the specimen width)")
+        if self.phi_g is None and self.alpha0 is None:
+            raise ValueError("Imperfection needs a weaker phi_g or alpha0")
+
+    def params(self, base: HParams) -> HParams:
+        ch = {}
+        if self.phi_g is not None:
+            ch["phi_g"] = self.phi_g
+        if self.alpha0 is not None:
+            ch["alpha0"] = self.alpha0
+        return base.replace(**ch)
+
+    def elements(self, mesh: skfem.Mesh) -> np.ndarray:
+        """Indices of the elements inside the weak zone."""
+        c = mesh.p[:, mesh.t].mean(axis=1)             # (2, nelems) centroids
+        x0, x1 = mesh.p[0].min(), mesh.p[0].max()
+        y0, y1 = mesh.p[1].min(), mesh.p[1].max()
+        w, h = x1 - x0, y1 - y0
+        if self.kind == "spot":
+            d = np.hypot(c[0] - (x0 + self.x * w), c[1] - (y0 + self.y * h))
+        else:
+            a = np.radians(self.angle)
+            d = np.abs(-(c[0] - (x0 + 0.5 * w)) * np.sin(a) + (c[1] - (y0 + 0.5 * h)) * np.cos(a))
+        inside = np.flatnonzero(d <= self.size * w)
+        if inside.size == 0:   # at least the nearest element, so the option always does something
+            inside = np.array([int(np.argmin(d))])
+        return inside
+
+
+class Biaxial:
+    """Plane-strain biaxial specimen: mesh, bases, dofs, boundary conditions, assembly.
+
+    mesh : skfem MeshQuad or MeshTri (see fem.mesh). params : HParams of the specimen; the
+    confining pressure sigma2 is params.p0 [Pa] (initial state in equilibrium with it).
+    imperfection : optional Imperfection. intorder : quadrature order (default 2: 2x2 Gauss
+    points on quads, 1 point on linear triangles).
+    """
+
+    def __init__(self, mesh: skfem.Mesh, params: HParams, imperfection: Imperfection | None = None,
+                 intorder: int | None = None, allow_sliding: bool = True):
+        self.mesh = mesh
+        self.params = params
+        self.sigma2 = float(params.p0)
+        if isinstance(mesh, skfem.MeshQuad1):
+            elem, order = skfem.ElementQuad1(), 2
+        elif isinstance(mesh, skfem.MeshTri1):
+            elem, order = skfem.ElementTriP1(), 1
+        else:
+            raise ValueError(f"mesh must be a linear MeshQuad or MeshTri, got {type(mesh).__name__}")
+        self.element = ElementVector(elem)
+        self.basis = Basis(mesh, self.element, intorder=order if intorder is None else intorder)
+        b = self.basis
+        self.nel = mesh.t.shape[1]
+        self.dx = np.asarray(b.dx)                                     # (nel, nqp) [m^2]
+        self.nqp = self.dx.shape[1]
+        self.npts = self.nel * self.nqp
+        self.ndofs = b.N
+        self.edofs = np.asarray(b.element_dofs)                         # (nbf, nel)
+        self.nbf = self.edofs.shape[0]
+        # symmetric gradients of the basis functions: (nbf, 2, 2, nel, nqp) [1/m]
+        g = np.stack([np.asarray(b.basis[j][0].grad) for j in range(self.nbf)])
+        self.Bsym = 0.5 * (g + np.swapaxes(g, 1, 2))
+        # the same as (P, nbf, 4) rows (P = nel*nqp points, C order (e, q)) for batched matmuls
+        self._Bp = np.ascontiguousarray(
+            self.Bsym.reshape(self.nbf, 4, self.npts).transpose(2, 0, 1))
+        self._wp = self.dx.reshape(self.npts)
+        rows = np.broadcast_to(self.edofs[:, None, :], (self.nbf, self.nbf, self.nel))
+        cols = np.broadcast_to(self.edofs[None, :, :], (self.nbf, self.nbf, self.nel))
+        self._rows = rows.transpose(2, 0, 1).ravel()   # element-major like the element matrices
+        self._cols = cols.transpose(2, 0, 1).ravel()
+        self._setup_bcs()
+        # material groups
+        groups = [(params, np.arange(self.npts))]
+        self.imperfection = imperfection
+        self.weak_elements = np.array([], dtype=int)
+        if imperfection is not None:
+            weak = imperfection.elements(mesh)
+            mask = np.zeros(self.nel, dtype=bool)
+            mask[weak] = True
+            pts = np.repeat(mask, self.nqp)
+            groups = [(params, np.flatnonzero(~pts)), (imperfection.params(params), np.flatnonzero(pts))]
+            self.weak_elements = weak
+        self.material = MaterialField(self.npts, groups, allow_sliding=allow_sliding)
+
+    # -- boundary conditions -----------------------------------------------------------------
+    def _setup_bcs(self):
+        p = self.mesh.p
+        x0, x1 = p[0].min(), p[0].max()
+        y0, y1 = p[1].min(), p[1].max()
+        self.width, self.height = float(x1 - x0), float(y1 - y0)
+        tol = 1e-9 * max(self.width, self.height)
+        nd = np.asarray(self.basis.nodal_dofs)                          # (2, nnodes): x, y dofs
+        bottom = np.flatnonzero(np.abs(p[1] - y0) < tol)
+        top = np.flatnonzero(np.abs(p[1] - y1) < tol)
+        mid = bottom[np.argmin(np.abs(p[0, bottom] - 0.5 * (x0 + x1)))]
+        self.top_y = nd[1, top]
+        self.bottom_y = nd[1, bottom]
+        self.fixed_x = np.array([nd[0, mid]])
+        self.prescribed = np.unique(np.concatenate([self.top_y, self.bottom_y, self.fixed_x]))
+        self.free = np.setdiff1d(np.arange(self.ndofs), self.prescribed)
+        # lateral confining pressure on the initial faces: traction t = sigma . n = -sigma2 n
+        lat = self.mesh.facets_satisfying(lambda x: (np.abs(x[0] - x0) < tol) | (np.abs(x[0] - x1) < tol))
+        fb = FacetBasis(self.mesh, self.element, facets=lat)
+        s2 = self.sigma2
+
+        @LinearForm
+        def pressure(v, w):
+            return -s2 * dot(w.n, v)
+
+        self.f_lat = np.asarray(pressure.assemble(fb))                  # (ndofs,) [N/m]
+        # reduced dofs of the force-controlled platen: free dofs + one platen dof tying top u_y
+        n_free = self.free.size
+        T = sp.lil_matrix((self.ndofs, n_free + 1))
+        T[self.free, np.arange(n_free)] = 1.0
+        T[self.top_y, n_free] = 1.0
+        self.T_platen = T.tocsr()
+
+    def prescribed_values(self, delta: float) -> np.ndarray:
+        """Values of the prescribed dofs (order of self.prescribed) for a platen displacement
+        ``delta`` [m] downwards (compression positive)."""
+        u = np.zeros(self.ndofs)
+        u[self.top_y] = -delta
+        return u[self.prescribed]
+
+    # -- kinematics and assembly --------------------------------------------------------------
+    def strain(self, u: np.ndarray) -> np.ndarray:
+        """(2, 2, npts) small strain of the nodal displacement u (ndofs,) [m], tension +."""
+        ue = u[self.edofs]                                              # (nbf, nel)
+        eps = np.einsum("je,jabeq->abeq", ue, self.Bsym, optimize=True)
+        return eps.reshape(2, 2, self.npts)
+
+    def internal_force(self, sigma: np.ndarray) -> np.ndarray:
+        """f_int = sum_points B^T sigma dx, shape (ndofs,) [N/m]; sigma (2, 2, npts) [Pa]."""
+        s = sigma.reshape(4, self.npts).T * self._wp[:, None]           # (P, 4)
+        fe = np.einsum("pja,pa->pj", self._Bp, s)                       # (P, nbf)
+        fe = fe.reshape(self.nel, self.nqp, self.nbf).sum(axis=1)       # (nel, nbf)
+        return np.bincount(self.edofs.T.ravel(), weights=fe.ravel(), minlength=self.ndofs)
+
+    def stiffness(self, D: np.ndarray) -> sp.csr_matrix:
+        """K = sum_points B^T D B dx, (ndofs, ndofs) csr [Pa]; D (2, 2, 2, 2, npts) [Pa]."""
+        Dp = np.ascontiguousarray(D.reshape(4, 4, self.npts).transpose(2, 0, 1))   # (P, 4, 4)
+        BD = np.matmul(self._Bp, Dp) * self._wp[:, None, None]                   # (P, nbf, 4)
+        Ke = np.matmul(BD, self._Bp.transpose(0, 2, 1))                          # (P, nbf, nbf)
+        Ke = Ke.reshape(self.nel, self.nqp, self.nbf, self.nbf).sum(axis=1)
+        K = sp.coo_matrix((Ke.ravel(), (self._rows, self._cols)), shape=(self.ndofs, self.ndofs))
+        return K.tocsr()
+
+    def platen_force(self, f_int: np.ndarray) -> float:
+        """Vertical force of the specimen on the top platen, tension + [N/m]."""
+        return float(np.sum(f_int[self.top_y]))
+
+    def volume_average(self, field: np.ndarray) -> np.ndarray:
+        """Volume average over the specimen of a (..., npts) field."""
+        return np.sum(field * self._wp, axis=-1) / np.sum(self._wp)
+
+    def per_element(self, field: np.ndarray, how: str = "mean") -> np.ndarray:
+        """(..., npts) point field -> (..., nel): volume mean or minimum over each element's points."""
+        f = field.reshape(field.shape[:-1] + (self.nel, self.nqp))
+        if how == "min":
+            return f.min(axis=-1)
+        w = self.dx / self.dx.sum(axis=1, keepdims=True)
+        return np.sum(f * w, axis=-1)

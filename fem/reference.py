@@ -1,0 +1,74 @@
+"""The material point under the same mixed control as the homogeneous FE specimen.
+
+The FE specimen prescribes the axial strain (platen), the lateral stress (sigma2 on the lateral
+faces) and a zero shear stress (smooth platens, free lateral faces): material control
+(eps11, sigma22, sigma12), i.e. ``MixedControl(strain_controlled=(True, False, False))``. (The
+drained path of hmodel.driver holds eps12 = 0 instead; for the isotropic fabric the two paths are
+the same since no shear arises.)
+
+Criteria of the tangent D (Mandel matrix D_M, (e11, e22, sqrt2 e12), model frame) at each step:
+- displacement-controlled platen: the free components are (e22, e12): block D_M[1:, 1:]; a
+  homogeneous lateral or shear mode is admissible in the FE, so lam_min of the FE K_s goes <= 0
+  no later than lam_min of this block's symmetric part;
+- force-controlled platen: all three components are free: the full D_M; lam_min(D_s) <= 0 is the
+  first strain direction with W2 <= 0 (Hill), and det D_M = 0 is the limit point (the peak of q at
+  constant sigma2).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hmodel import HParams
+from hmodel.driver import MixedControl, isotropic_state, mixed_step, run_path, drained_biaxial
+from hmodel.material import to_voigt
+
+from .indicators import mandel
+
+__all__ = ["material_point_criteria", "material_point_curve"]
+
+
+def material_point_criteria(params: HParams, d_eps1: float, n_steps: int) -> dict:
+    """Step the material point (eps11 += d_eps1, sigma22 = p0, sigma12 = 0) n_steps times.
+
+    Returns arrays of length n_steps + 1 (row 0: the isotropic state with the tangent of a zero
+    increment is not computed: NaN): eps1, s1, s2, q, p, eta [Pa], and per step
+    lam_min_ds_disp, det_disp, lam_min_ds_force, det_force (Mandel matrices, Pa / Pa^n).
+    """
+    ctl = MixedControl(strain_controlled=(True, False, False), d_eps=(d_eps1, 0.0, 0.0))
+    state = isotropic_state(params)
+    target = np.array([0.0, params.p0, 0.0])
+    keys = ("eps1", "s1", "s2", "lam_min_ds_disp", "det_disp", "lam_min_ds_force", "det_force")
+    out = {k: np.full(n_steps + 1, np.nan) for k in keys}
+    s0 = to_voigt(state.stress)[0]
+    out["eps1"][0], out["s1"][0], out["s2"][0] = 0.0, s0[0], s0[1]
+    guess = np.zeros(3)
+    eps1 = 0.0
+    for k in range(1, n_steps + 1):
+        inc, de, _ = mixed_step(state, params, ctl, target, guess=guess)
+        de = np.asarray(de)
+        guess = de
+        state = inc.state
+        eps1 += d_eps1
+        M = mandel(inc.tangent)
+        Ms = 0.5 * (M + M.T)
+        s = to_voigt(inc.stress)[0]
+        out["eps1"][k], out["s1"][k], out["s2"][k] = eps1, s[0], s[1]
+        out["lam_min_ds_force"][k] = np.linalg.eigvalsh(Ms)[0]
+        out["det_force"][k] = np.linalg.det(M)
+        out["lam_min_ds_disp"][k] = np.linalg.eigvalsh(Ms[1:, 1:])[0]
+        out["det_disp"][k] = np.linalg.det(M[1:, 1:])
+    out["q"] = out["s1"] - out["s2"]
+    out["p"] = 0.5 * (out["s1"] + out["s2"])
+    out["eta"] = out["q"] / out["p"]
+    return out
+
+
+def material_point_curve(params: HParams, eps1_max: float, d_eps1: float = 1e-5) -> dict:
+    """The drained biaxial curve of hmodel.driver (for the figure and the peak): eps1, q, p, eta,
+    and the peak (eps1_peak, q_peak, eta_peak)."""
+    n = max(1, int(round(eps1_max / d_eps1)))
+    r = run_path(isotropic_state(params), params, drained_biaxial(d_eps1), n)
+    p, q, eta = r.invariants()
+    k = int(np.argmax(q))
+    return {"eps1": r.eps[:, 0], "q": q, "p": p, "eta": eta, "eps1_peak": float(r.eps[k, 0]),
+            "q_peak": float(q[k]), "eta_peak": float(eta[k]), "peak_is_interior": k < len(q) - 1}

@@ -1,0 +1,24 @@
+import numpy as np
+import pytest
+
+from hmodel import HParams
+from fem.biaxial import BiaxialConfig, run_biaxial
+
+# Small, fast settings for the default (not slow) tests: n_dir = 36 moves the material peak to
+# eps1 ~ 2.46 % (180 orientations: 2.09 %), the mechanisms are the same.
+N_DIR = 36
+D_EPS1 = 5e-4
+
+
+@pytest.fixture(scope="session")
+def params36():
+    return HParams(n_dir=N_DIR)
+
+
+@pytest.fixture(scope="session")
+def homogeneous_run(tmp_path_factory):
+    """The perfect 2 x 4 quad specimen from the isotropic state past the peak (eps1 = 3 %), with
+    every output written."""
+    out = tmp_path_factory.mktemp("homogeneous")
+    cfg = BiaxialConfig(nx=2, ny=4, n_dir=N_DIR, d_eps1=D_EPS1, eps1_max=0.03, n_sphere=300)
+    return run_biaxial(cfg, out)

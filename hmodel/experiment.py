@@ -3,6 +3,7 @@ bifurcation domain (sections 3.3-3.4, Figs. 3-11). Functions here are what the C
 call; they return arrays and write nothing (see ``hmodel.cli`` for files and figures)."""
 from __future__ import annotations
 
+import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 from typing import NamedTuple
@@ -155,5 +156,6 @@ def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
     jobs = [(params, s, kw) for s in sig]
     if workers <= 1 or len(sig) == 1:
         return [_domain_job(j) for j in jobs]
-    with ProcessPoolExecutor(max_workers=workers) as ex:
+    # spawn, not fork: a fork after Numba's parallel kernel has started its threads can crash
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as ex:
         return list(ex.map(_domain_job, jobs))

@@ -109,8 +109,21 @@ def _update_impl(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
                     dN2_0 = -kn * x20; dN2_1 = -kn * x21; dN2_2 = -kn * x22
                     dT1_0 = 0.0; dT1_1 = 0.0; dT1_2 = 0.0
                 else:
-                    # stays open: nominal touching geometry at the current width
-                    da = math.asin(min(nl2_ / (2.0 * two_r), 1.0)) - a
+                    # stays open: no force, no stiffness, no second-order work; unless an extra
+                    # contact (1-4 or 2-6) touches, nothing but the lengths changes
+                    if L1 >= two_r and L2 >= two_r and nl1_ >= two_r and nl2_ >= two_r:
+                        o_d1[p, i] = two_r
+                        o_d2[p, i] = two_r
+                        o_alpha[p, i] = a
+                        o_N1[p, i] = 0.0
+                        o_T1[p, i] = 0.0
+                        o_N2[p, i] = 0.0
+                        o_l1[p, i] = nl1_
+                        o_l2[p, i] = nl2_
+                        o_sliding[p, i] = False
+                        o_open[p, i] = True
+                        continue
+                    da = 0.0
                     dd1 = two_r - D1
                     dd2 = two_r - D2
                     nd1 = two_r

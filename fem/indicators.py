@@ -20,6 +20,7 @@ basis (e11, e22, sqrt(2) e12), where eps : D : eps = x . D_M x:
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
@@ -169,25 +170,65 @@ def fibonacci_sphere(n: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
-def _w2n(M: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """Normalized W2 for points (P, 3, 3) and directions X: shared (N, 3) or per point (P, N, 3)
-    -> (P, N)."""
+@numba.njit(cache=True, parallel=True)
+def _w2_min_kernel(M, X, spacing):
+    """Per point: min over the sampled directions X (N, 3) of x.Mx / (|Mx| |x|), then a pattern
+    search (rings of 12 directions at radii h/3, 2h/3, h around the best, h /= 3, 4 rounds)."""
     P = M.shape[0]
-    if X.ndim == 2:        # one GEMM: (P*3, 3) @ (3, N)
-        DX = (M.reshape(P * 3, 3) @ X.T).reshape(P, 3, -1)                    # (P, 3, N)
-        num = np.einsum("pan,na->pn", DX, X)
-        den = np.sqrt(np.einsum("pan,pan->pn", DX, DX) * np.sum(X * X, axis=1)[None])
-    else:
-        # explicit 3x3 products on (P, N) slabs: much faster than a batched einsum of 3x3 blocks
-        Xc = [X[:, :, b] for b in range(3)]
-        DX = [sum(M[:, a, b, None] * Xc[b] for b in range(3)) for a in range(3)]
-        num = sum(DX[a] * Xc[a] for a in range(3))
-        den = np.sqrt(sum(d * d for d in DX) * sum(x * x for x in Xc))
-    return num / np.where(den > 0, den, 1.0)
+    N = X.shape[0]
+    out = np.empty(P)
+    for p in numba.prange(P):
+        m = M[p]
+        best = 1e300
+        bx = 0.0
+        by = 0.0
+        bz = 1.0
+        for n in range(N):
+            v = _w2_one(m, X[n, 0], X[n, 1], X[n, 2])
+            if v < best:
+                best, bx, by, bz = v, X[n, 0], X[n, 1], X[n, 2]
+        h = spacing
+        for _ in range(4):
+            # tangent frame at the best direction
+            if abs(bz) < 0.9:
+                t1x, t1y, t1z = -by, bx, 0.0           # best x e_z
+            else:
+                t1x, t1y, t1z = 0.0, bz, -by           # best x e_x
+            nt = np.sqrt(t1x * t1x + t1y * t1y + t1z * t1z)
+            t1x, t1y, t1z = t1x / nt, t1y / nt, t1z / nt
+            t2x = by * t1z - bz * t1y
+            t2y = bz * t1x - bx * t1z
+            t2z = bx * t1y - by * t1x
+            cx, cy, cz = bx, by, bz
+            for r in range(1, 4):
+                rad = h * r / 3.0
+                for k in range(12):
+                    a = 2.0 * np.pi * k / 12.0
+                    ca, sa = np.cos(a), np.sin(a)
+                    x = cx + rad * (ca * t1x + sa * t2x)
+                    y = cy + rad * (ca * t1y + sa * t2y)
+                    z = cz + rad * (ca * t1z + sa * t2z)
+                    v = _w2_one(m, x, y, z)
+                    if v < best:
+                        nn = np.sqrt(x * x + y * y + z * z)
+                        best, bx, by, bz = v, x / nn, y / nn, z / nn
+            h /= 3.0
+        out[p] = best
+    return out
 
 
-def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180,
-                     chunk: int = 512) -> dict:
+@numba.njit(cache=True, inline="always")
+def _w2_one(m, x, y, z):
+    d0 = m[0, 0] * x + m[0, 1] * y + m[0, 2] * z
+    d1 = m[1, 0] * x + m[1, 1] * y + m[1, 2] * z
+    d2 = m[2, 0] * x + m[2, 1] * y + m[2, 2] * z
+    den = np.sqrt((d0 * d0 + d1 * d1 + d2 * d2) * (x * x + y * y + z * z))
+    if den == 0.0:
+        return 0.0
+    return (x * d0 + y * d1 + z * d2) / den
+
+
+def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180) -> dict:
     """Local indicators of tangents D (2, 2, 2, 2, npts) [Pa]; every output has shape (npts,).
 
     det_D [Pa^3], det_Ds [Pa^3], lam_min_Ds [Pa], w2_min [-] (min normalized W2 over strain
@@ -201,30 +242,7 @@ def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180,
            "lam_min_Ds": np.linalg.eigvalsh(Ms)[:, 0]}
     X = fibonacci_sphere(n_sphere)                       # (N, 3)
     spacing = np.sqrt(2.0 * np.pi / n_sphere)            # typical angular gap [rad]
-    w2 = np.empty(npts)
-    for s in range(0, npts, chunk):
-        m = M[s:s + chunk]
-        vals = _w2n(m, X)                                # (p, N)
-        best = X[np.argmin(vals, axis=1)]                # (p, 3)
-        wmin = vals.min(axis=1)
-        ang = np.linspace(0.0, 2 * np.pi, 12, endpoint=False)
-        h = spacing
-        for _ in range(4):   # pattern search: rings of radius h/3, 2h/3, h around the best, h /= 3
-            t1 = np.cross(best, np.array([0.0, 0.0, 1.0]))
-            t1 = np.where(np.linalg.norm(t1, axis=1, keepdims=True) < 1e-8,
-                          np.cross(best, np.array([1.0, 0.0, 0.0])), t1)
-            t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-            t2 = np.cross(best, t1)
-            d = (np.cos(ang)[None, :, None] * t1[:, None, :] + np.sin(ang)[None, :, None] * t2[:, None, :])
-            Y = np.concatenate([best[:, None, :]] + [best[:, None, :] + f * h * d for f in (1 / 3, 2 / 3, 1.0)],
-                               axis=1)
-            Y /= np.linalg.norm(Y, axis=2, keepdims=True)
-            v = _w2n(m, Y)
-            j = np.argmin(v, axis=1)
-            best = Y[np.arange(len(j)), j]
-            wmin = np.minimum(wmin, v[np.arange(len(j)), j])
-            h /= 3.0
-        w2[s:s + chunk] = wmin
+    w2 = _w2_min_kernel(np.ascontiguousarray(M), X, spacing)
     out["w2_min"] = w2
     th = np.linspace(0.0, np.pi, n_angles, endpoint=False)
     n = np.stack([np.cos(th), np.sin(th)])               # (2, A)

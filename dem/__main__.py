@@ -13,8 +13,15 @@ def _params(a):
                      friction_deg=a.friction)
 
 
+def _threads(a):
+    if getattr(a, "threads", None):
+        import numba
+        numba.set_num_threads(min(a.threads, numba.config.NUMBA_NUM_THREADS))
+
+
 def cmd_biaxial(a):
     from .experiment import run_biaxial
+    _threads(a)
     t0 = time.time()
     res = run_biaxial(_params(a), a.out, rate=a.rate, confining=a.confining, eta_a=a.eta_a,
                       eps_max=a.eps_max, compaction_friction_deg=a.compaction_friction,
@@ -78,6 +85,8 @@ def main(argv=None):
     b.add_argument("--compaction-friction", type=float, default=0.0, help="[deg]")
     b.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz")
     b.add_argument("--no-vtk", action="store_true")
+    b.add_argument("--threads", type=int, default=None,
+                   help="numba threads (results do not depend on it; default: all)")
     b.set_defaults(func=cmd_biaxial)
 
     p = sub.add_parser("probes", help="directional analysis from a saved state")

@@ -228,6 +228,32 @@ def _w2_one(m, x, y, z):
     return (x * d0 + y * d1 + z * d2) / den
 
 
+@numba.njit(cache=True, parallel=True)
+def _rice_kernel(Dq, c, s):
+    """min over the angles (cos c, sin s) of det A(n), A_jk = n_i D_ijkl n_l, per point; Dq is
+    (P, 16) in C order of (i, j, k, l). Returns (min values, index of the minimizing angle)."""
+    P = Dq.shape[0]
+    vals = np.empty(P)
+    idx = np.empty(P, dtype=np.int64)
+    for p in numba.prange(P):
+        d = Dq[p]
+        best = 1e300
+        kb = 0
+        for a in range(c.shape[0]):
+            n0, n1 = c[a], s[a]
+            A = np.zeros((2, 2))
+            for j in range(2):
+                for k in range(2):
+                    A[j, k] = (n0 * n0 * d[0 * 8 + j * 4 + k * 2 + 0] + n0 * n1 * d[0 * 8 + j * 4 + k * 2 + 1]
+                               + n1 * n0 * d[1 * 8 + j * 4 + k * 2 + 0] + n1 * n1 * d[1 * 8 + j * 4 + k * 2 + 1])
+            v = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+            if v < best:
+                best, kb = v, a
+        vals[p] = best
+        idx[p] = kb
+    return vals, idx
+
+
 def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180) -> dict:
     """Local indicators of tangents D (2, 2, 2, 2, npts) [Pa]; every output has shape (npts,).
 
@@ -245,15 +271,7 @@ def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180) ->
     w2 = _w2_min_kernel(np.ascontiguousarray(M), X, spacing)
     out["w2_min"] = w2
     th = np.linspace(0.0, np.pi, n_angles, endpoint=False)
-    n = np.stack([np.cos(th), np.sin(th)])               # (2, A)
-    # A_jk(n) = n_i D_ijkl n_l: the four entries are quadratic forms in n, (P, 2, 2) x (2, A)
-    nn = np.stack([n[0] * n[0], n[0] * n[1], n[1] * n[0], n[1] * n[1]])       # (4, A): (i, l)
-    Dq = np.moveaxis(D, -1, 0)                                                # (P, i, j, k, l)
-    def ent(j, k):
-        c = np.stack([Dq[:, 0, j, k, 0], Dq[:, 0, j, k, 1], Dq[:, 1, j, k, 0], Dq[:, 1, j, k, 1]], axis=1)
-        return c @ nn                                                         # (P, A)
-    detA = ent(0, 0) * ent(1, 1) - ent(0, 1) * ent(1, 0)
-    k = np.argmin(detA, axis=1)
-    out["rice_min"] = detA[np.arange(npts), k]
+    Dq = np.ascontiguousarray(np.moveaxis(D, -1, 0)).reshape(npts, 16)     # (P, ijkl)
+    out["rice_min"], k = _rice_kernel(Dq, np.cos(th), np.sin(th))
     out["rice_angle"] = np.degrees(th[k])
     return out

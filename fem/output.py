@@ -142,7 +142,8 @@ def plot_curve(path, curve: dict, mp: dict | None = None, title: str = "") -> No
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     if mp is not None:
-        ax.plot(100 * mp["eps1"], mp["q"] / 1e3, "k-", lw=1, label="material point (hmodel.driver)")
+        ax.plot(100 * mp["eps1"], mp["q"] / 1e3, "k--", lw=1.2, zorder=3,
+                label="material point (hmodel.driver, d_eps1 = 1e-5)")
     e, q = 100 * curve["eps1"], curve["q"] / 1e3
     ax.plot(e, q, "o-", ms=2.5, lw=1, color="C0", label="FE specimen")
     marks = first_events(curve)

@@ -54,9 +54,9 @@ class Trial(NamedTuple):
     """A trial update of every point (nothing committed).
 
     sigma : (2, 2, npts) FE stress [Pa]; D : (2, 2, 2, 2, npts) FE tangent [Pa];
-    states : one new HState per group; sliding, opened : (npts,) fractions of hexagons sliding /
-    open at each point; patterns : per group (sliding, is_open) bool arrays, to see whether the
-    sliding pattern changed between Newton iterations.
+    states : one new HState per group (their sliding / is_open flags are the pattern, compared
+    between Newton iterates by MaterialField.pattern_changes); sliding, opened : (npts,) fractions
+    of hexagons sliding / open at each point.
     """
 
     sigma: np.ndarray

@@ -99,13 +99,30 @@ def _writer_class():
             import h5py
             self.h5_filename = str(self.filename.with_suffix(".h5"))
             self.h5_file = h5py.File(self.h5_filename, "w")
+            self._chunks = []
             return self
 
+        def write_data(self, t, point_data=None, cell_data=None):
+            super().write_data(t, point_data=point_data, cell_data=cell_data)
+            # serialize each step's Grid once: the flush below then costs O(1) serialization per
+            # step instead of re-serializing the whole growing tree
+            chunk = ET.tostring(self.collection[-1])
+            # the usual xi prefix for the XInclude namespace (ElementTree names it ns0)
+            chunk = chunk.replace(b"xmlns:ns0=", b"xmlns:xi=").replace(b"<ns0:include", b"<xi:include")
+            self._chunks.append(chunk)
+
         def flush(self):
+            """Make fields.h5 durable and rewrite fields.xdmf atomically (same XML as meshio's
+            __exit__ would write: Domain = temporal collection + the mesh grid)."""
             self.h5_file.flush()
-            buf = io.BytesIO()
-            ET.ElementTree(self.xdmf_file).write(buf)
-            atomic_write_bytes(self.filename, buf.getvalue())
+            if not hasattr(self, "_chunks"):
+                self._chunks = []
+            coll = self.collection
+            head = (b'<Xdmf Version="3.0"><Domain><Grid Name="%s" GridType="Collection" '
+                    b'CollectionType="Temporal">' % coll.get("Name").encode())
+            mesh = b"".join(ET.tostring(g) for g in self.domain if g is not coll)
+            data = head + b"".join(self._chunks) + b"</Grid>" + mesh + b"</Domain></Xdmf>"
+            atomic_write_bytes(self.filename, data)
 
         def __exit__(self, *_):
             self.flush()

@@ -89,3 +89,20 @@ def test_global_second_order_work_sign(both):
     assert np.all(w[:k_peak - 1] > 0)
     assert np.all(w[k_peak + 1:] < 0)
     assert np.allclose(c["w2_global_raw"], c["w2_ext_raw"], rtol=1e-6, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_default_problem_table1(tmp_path):
+    """The CLI default problem (10 x 20 quads, n_dir 180, d_eps1 1e-4 to 2.5 %): the perfect
+    specimen follows the material point, its limit point is the material peak (2.09 %), and Hill's
+    condition fires well before it."""
+    from fem.biaxial import BiaxialConfig, run_biaxial
+    from hmodel import HParams
+    r = run_biaxial(BiaxialConfig(fields=False), tmp_path)
+    c = r.curve
+    mp = material_point_criteria(HParams(), 1e-4, len(c["step"]) - 1)
+    assert np.max(np.abs(c["q"] - mp["q"])) / 200e3 < 1e-8
+    ev = r.summary["events"]
+    assert abs(ev["det_k_f"]["eps1"] - r.summary["material_point"]["eps1_peak"]) <= 2e-4
+    assert ev["lam_min_ks_f"]["eps1"] < 0.6 * ev["det_k_f"]["eps1"]
+    assert ev["lam_min_ks_f"]["row"] == _first(mp["lam_min_ds_force"][1:] <= 0) + 1

@@ -127,6 +127,16 @@ class MaterialField:
             states.append(ns)
         return Trial(sigma, D, states, sliding, opened)
 
+    def fractions(self) -> tuple:
+        """(sliding, opened): (npts,) fractions of the hexagons of each point that slid / are open
+        in the committed state (the pattern of the last converged step)."""
+        sliding = np.empty(self.npts)
+        opened = np.empty(self.npts)
+        for (params, idx), st in zip(self.groups, self.states):
+            sliding[idx] = st.sliding.mean(axis=-1)
+            opened[idx] = st.is_open.mean(axis=-1)
+        return sliding, opened
+
     def commit(self, trial: Trial) -> None:
         self.states = list(trial.states)
 

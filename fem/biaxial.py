@@ -94,6 +94,7 @@ class RunResult:
     out_dir: Path | None = None
     problem: object = None
     steps: list = field(default_factory=list)
+    u: np.ndarray | None = None          # final (last converged) nodal displacement [m]
 
 
 def _cells(prob):
@@ -291,7 +292,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
                    title=f"{prob.nel} elements, {prob.npts} points, n_dir = {prob.params.n_dir}")
         atomic_write_bytes(out / "summary.json", json.dumps(summ, indent=1, default=float).encode())
         logf.close()
-    result = RunResult(curve, events, summ, timings, out, prob, steps)
+    result = RunResult(curve, events, summ, timings, out, prob, steps, stepper.u.copy())
     if error is not None:
         error.result = result
         raise error

@@ -35,6 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--phi-g", type=float, default=d.phi_g)
     g.add_argument("--alpha0", type=float, default=d.alpha0)
     g.add_argument("--r-g", type=float, default=d.r_g)
+    g.add_argument("--thickness", type=float, default=None,
+                   help="hexagon slab thickness h [m] of the material (default 2 r_g)")
     g.add_argument("--n-dir", type=int, default=d.n_dir)
     g = b.add_argument_group("imperfection")
     g.add_argument("--imperfection", choices=["none", "spot", "band"], default="none")

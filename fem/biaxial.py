@@ -52,6 +52,7 @@ class BiaxialConfig:
     phi_g: float = 20.0
     alpha0: float = 42.8
     r_g: float = 1.0e-3
+    thickness: float | None = None
     n_dir: int = 180
     sigma2: float = 200.0e3
     imperfection: str | None = None
@@ -68,7 +69,7 @@ class BiaxialConfig:
 
     def params(self) -> HParams:
         return HParams(kn=self.kn, kt=self.kt, phi_g=self.phi_g, alpha0=self.alpha0, r_g=self.r_g,
-                       p0=self.sigma2, n_dir=self.n_dir)
+                       p0=self.sigma2, n_dir=self.n_dir, thickness=self.thickness)
 
 
 def build_problem(cfg: BiaxialConfig) -> Biaxial:

@@ -70,3 +70,21 @@ def test_local_w2_min_finds_negative_direction():
     D2[0, 1, 0, 1] = D2[1, 0, 1, 0] = D2[0, 1, 1, 0] = D2[1, 0, 0, 1] = 0.5
     loc2 = local_indicators(D2)
     assert loc2["w2_min"][0] > 0 and loc2["lam_min_Ds"][0] == pytest.approx(1.0)
+
+
+def test_w2_min_against_brute_force():
+    """The sampled + pattern-searched minimum is within 1e-4 of a 100k-direction brute force on
+    random non-symmetric tangents (measured: at most 1.3e-5 above it)."""
+    rng = np.random.default_rng(3)
+    D = rng.normal(size=(2, 2, 2, 2, 12))
+    D = 0.5 * (D + D.transpose(1, 0, 2, 3, 4))
+    D = 0.5 * (D + D.transpose(0, 1, 3, 2, 4))               # minor symmetries
+    M = np.moveaxis(mandel(D), -1, 0)
+    X = rng.normal(size=(100_000, 3))
+    X /= np.linalg.norm(X, axis=1, keepdims=True)
+    DX = np.einsum("pab,nb->pna", M, X)
+    brute = (np.einsum("na,pna->pn", X, DX) / np.linalg.norm(DX, axis=2)).min(axis=1)
+    w = local_indicators(D)["w2_min"]
+    assert np.all(w <= brute + 1e-4)
+    # and never below the true minimum by more than the brute force's own sampling error
+    assert np.all(w >= brute - 1e-3)

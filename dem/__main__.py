@@ -41,6 +41,8 @@ def cmd_probes(a):
                         plastic_tol=a.plastic_tol).validate()
     t0 = time.time()
     state, meta = io.load_state(a.state)
+    if a.damping is not None:
+        state = state._replace(params=state.params.replace(damping=a.damping))
     os.makedirs(a.out, exist_ok=True)
     if not a.no_relax:
         state, ok, steps, ub = prepare_reference(state, opts)
@@ -102,6 +104,8 @@ def main(argv=None):
     p.add_argument("--plastic-tol", type=float, default=0.05)
     p.add_argument("--no-relax", action="store_true",
                    help="probe from the saved state as is (no stress-controlled relaxation)")
+    p.add_argument("--damping", type=float, default=None,
+                   help="override the Cundall damping of the state (sensitivity check)")
     p.add_argument("--workers", type=int, default=None, help="local processes")
     p.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
     p.set_defaults(func=cmd_probes)

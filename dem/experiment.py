@@ -141,6 +141,10 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
             st, rowd = min(cands, key=lambda v: v[1]["step"])
             io.save_state(a_path, st, meta={"A": rowd, "eta_a": eta_a, "eta_a_reached": False})
             info["A"] = rowd
+            if vtk:
+                sa = Simulation(st)
+                io.write_particles_vtk(os.path.join(out_dir, "particlesA.vtu"), sa)
+                io.write_contacts_vtk(os.path.join(out_dir, "contactsA.vtu"), sa)
         if verbose:
             _progress(f"[biaxial] WARNING: eta never reached {eta_a} (max {info['eta_max']:.4f});"
                       f" stateA.npz holds the first state with eta >= 0.97 max eta "

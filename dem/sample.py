@@ -127,7 +127,10 @@ def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.
     if verbose:
         print(f"[compact] radii grown from {s0:.3f} in {grown} steps, porosity="
               f"{sim.porosity():.4f}, stress={sim.wall_stress()}", file=sys.stderr)
-    ok1, st1, _, _ = equilibrate(sim, (stress, stress), tol, unbalanced_tol, max_steps,
+    # the frictionless stage only has to densify: a 10x looser balance criterion (the
+    # frictionless servo-controlled packing creeps slowly to 1e-3 for 12,000 disks); the
+    # final state is checked with unbalanced_tol after the friction is restored
+    ok1, st1, _, _ = equilibrate(sim, (stress, stress), tol, 10 * unbalanced_tol, max_steps,
                                  progress=prog("frictionless"))
     st1 += grown
     sim.vmax_override = None

@@ -45,7 +45,7 @@ def cmd_probes(a):
         state = state._replace(params=state.params.replace(damping=a.damping))
     os.makedirs(a.out, exist_ok=True)
     if not a.no_relax:
-        state, ok, steps, ub = prepare_reference(state, opts)
+        state, ok, steps, ub = prepare_reference(state, opts, verbose=True)
         print(f"[probes] reference relaxed at the A stresses: converged={ok} steps={steps} "
               f"unbalanced={ub:.2e}", file=sys.stderr)
         io.save_state(os.path.join(a.out, "stateR.npz"), state,

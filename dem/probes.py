@@ -71,15 +71,23 @@ def _axes(sim):
     return snap, np.array([sy, sx]), sim.size[::-1].copy()
 
 
-def prepare_reference(state: State, opts: ProbeOptions = ProbeOptions()):
+def prepare_reference(state: State, opts: ProbeOptions = ProbeOptions(), verbose=False):
     """Relax `state` under stress control at its own wall stresses.  Returns
     (State R, converged, steps, unbalanced)."""
     sim = Simulation(state)
     sim.cap_on = True
     s = sim.wall_stress()
     sim.set_control(stress_path(s, s, sim.step, 0))
+    last = [time.time()]
+
+    def progress(steps, s_now, ub):
+        if verbose and time.time() - last[0] > 5.0:
+            last[0] = time.time()
+            print(f"[probes] relaxing A: step {steps} unbalanced={ub:.2e} "
+                  f"s=({s_now[0]:.6g}, {s_now[1]:.6g}) Pa", file=sys.stderr, flush=True)
+
     ok, steps, ub, _ = equilibrate(sim, s, opts.stress_tol, opts.unbalanced_tol,
-                                   opts.max_steps, opts.check_every)
+                                   opts.max_steps, opts.check_every, progress=progress)
     return sim.state(), ok, steps, ub
 
 

@@ -69,6 +69,16 @@ def cmd_bench(a):
     print(f"particle-steps/s: {res['particle_steps_per_s_all_threads']:.4g}")
 
 
+def cmd_crosscheck(a):
+    from .crosscheck import run_crosscheck
+    t0 = time.time()
+    c, timings = run_crosscheck(a.out, full=a.full, n=a.n, seed=a.seed, rate=a.rate,
+                                workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
+                                dem_max_steps=a.max_steps)
+    print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
+    print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m dem", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -116,6 +126,18 @@ def main(argv=None):
     c.add_argument("--seed", type=int, default=1)
     c.add_argument("--cache", default=os.path.join(os.path.expanduser("~"), ".cache", "dem"))
     c.set_defaults(func=cmd_bench)
+
+    x = sub.add_parser("crosscheck", help="H-model, FE and DEM side by side (report.md + figures)")
+    x.add_argument("--out", required=True)
+    x.add_argument("--full", action="store_true", help="the paper's 12,000 disks at 0.01/s (about 1.5 h)")
+    x.add_argument("--n", type=int, default=None, help="DEM disks (default 1000, 12000 with --full)")
+    x.add_argument("--seed", type=int, default=1)
+    x.add_argument("--rate", type=float, default=None, help="DEM axial strain rate [1/s] (0.05, 0.01 with --full)")
+    x.add_argument("--max-steps", type=int, default=None, help="cap of each DEM probe run [steps]")
+    x.add_argument("--workers", type=int, default=None, help="local processes for the probes")
+    x.add_argument("--skip-dem", action="store_true", help="H-model and FE only")
+    x.add_argument("--no-domain", action="store_true", help="skip the H-model bifurcation domain")
+    x.set_defaults(func=cmd_crosscheck)
 
     a = ap.parse_args(argv)
     try:

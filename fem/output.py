@@ -10,12 +10,13 @@ from __future__ import annotations
 import csv
 import io
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_write_bytes", "CurveWriter", "FieldWriter", "CURVE_COLUMNS", "plot_curve",
+from hmodel.io import atomic_write_bytes
+
+__all__ = ["CurveWriter", "FieldWriter", "CURVE_COLUMNS", "plot_curve",
            "read_curve"]
 
 CURVE_COLUMNS = [
@@ -27,23 +28,6 @@ CURVE_COLUMNS = [
     "min_det_D", "min_det_Ds", "min_lam_Ds", "min_w2_local", "min_rice",
     "n_pts_w2_neg", "n_pts_rice_neg", "sliding_fraction", "open_fraction", "eps2_mean", "time_s",
 ]
-
-
-def atomic_write_bytes(path, data: bytes) -> None:
-    """Write a whole file at once: temp file in the same directory, then os.replace."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fchmod(f.fileno(), 0o644)   # mkstemp makes 0600; outputs are ordinary files
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 class CurveWriter:

@@ -7,7 +7,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-__all__ = ["atomic_open", "write_csv", "save_figure", "read_csv"]
+__all__ = ["atomic_open", "atomic_write_bytes", "write_csv", "save_figure", "read_csv"]
 
 
 @contextmanager
@@ -20,11 +20,20 @@ def atomic_open(path, mode="w"):
     try:
         with os.fdopen(fd, mode) as f:
             yield f
+            f.flush()
+            os.fchmod(f.fileno(), 0o644)    # mkstemp makes 0600; outputs are ordinary files
+            os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def atomic_write_bytes(path, data: bytes) -> None:
+    """Write a whole file at once (temporary file beside it, then os.replace)."""
+    with atomic_open(path, "wb") as f:
+        f.write(data)
 
 
 def write_csv(path, columns: dict, fmt: str = "%.10g"):

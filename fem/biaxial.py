@@ -18,8 +18,9 @@ from hmodel import HParams
 from .adapter import stress_to_model, strain_to_model
 from .indicators import global_indicators, global_w2, local_indicators
 from .mesh import rectangle, from_file
-from .output import (CurveWriter, FieldWriter, plot_curve, read_curve, first_events,
-                     atomic_write_bytes)
+from hmodel.io import atomic_write_bytes
+
+from .output import CurveWriter, FieldWriter, plot_curve, read_curve, first_events
 from .problem import Biaxial, Imperfection
 from .reference import material_point_curve
 from .solver import LoadStepper

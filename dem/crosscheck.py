@@ -142,19 +142,25 @@ def conclusions(h: dict, dem_rows: list | None, fem: dict | None) -> dict:
         a, w2, mic = g("alpha_sigma"), g("w2"), g("w2_micro")
         w2n, w2t, pl = g("w2n"), g("w2t"), g("plastic").astype(bool)
         conv = g("converged").astype(bool) & g("converged_elastic").astype(bool)
-        negd = w2 <= 0
-        k = int(np.argmin(w2))
-        low = w2 <= np.min(w2) + 0.1            # the low-W2 cone (within 0.1 of the minimum)
+        # A probe stopped at the step cap has no equilibrium end (the stress increment exceeds
+        # what the sample carries, as in directions of increasing q near the peak): its W2 is
+        # that of a dynamic state, so the W2 statistics use the probes that reached equilibrium.
+        ok = conv
+        ka = np.flatnonzero(ok)
+        k = int(ka[np.argmin(w2[ok])])
+        negd = ok & (w2 <= 0)
+        low = ok & (w2 <= w2[k] + 0.1)            # the low-W2 cone (within 0.1 of the minimum)
         c["dem"] = {
             "n_probes": int(a.size), "n_not_converged": int((~conv).sum()),
-            "cone_w2": _arcs(a, negd), "min_w2": float(w2[k]), "alpha_min_w2": float(a[k]),
+            "alpha_not_converged": [float(x) for x in a[~conv]],
+            "cone_w2": _arcs(a[ok], negd[ok]), "min_w2": float(w2[k]), "alpha_min_w2": float(a[k]),
             "min_in_third_quadrant": bool(180.0 <= a[k] <= 270.0),
-            "low_w2_cone": _arcs(a, low),
+            "low_w2_cone": _arcs(a[ok], low[ok]),
             "plastic_zone": _arcs(a, pl),
-            "micro_minus_macro": _zone_stats(w2, mic, pl),
-            "micro_below_macro_in_plastic_zone": bool(pl.any() and np.mean(mic[pl] - w2[pl]) < 0),
-            "w2n_min": float(w2n.min()),
-            "w2t_max_in_plastic_zone": float(w2t[pl].max()) if pl.any() else None,
+            "micro_minus_macro": _zone_stats(w2[ok], mic[ok], pl[ok]),
+            "micro_below_macro_in_plastic_zone": bool((pl & ok).any() and np.mean(mic[pl & ok] - w2[pl & ok]) < 0),
+            "w2n_min": float(w2n[ok].min()),
+            "w2t_max_in_plastic_zone": float(w2t[pl & ok].max()) if (pl & ok).any() else None,
             "w2t_at_min_w2": float(w2t[k]), "w2n_at_min_w2": float(w2n[k]),
         }
     if fem is not None:
@@ -328,8 +334,11 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
          f"minimum W2 = {hm['min_w2']:.3f} at {hm['alpha_min_w2']:.1f} deg, inside the plastic zone "
          f"{_fmt_arcs(hm['plastic_zone'])} deg.")
     if dm:
-        s += (f" DEM ({dm['n_probes']} probes, {dm['n_not_converged']} stopped at the step cap, "
-              f"their end not in equilibrium): W2 <= 0 for {_fmt_arcs(dm['cone_w2']) if dm['cone_w2'] else 'no direction'}; minimum W2 = {dm['min_w2']:.3f} at "
+        nc = dm["alpha_not_converged"]
+        s += (f" DEM ({dm['n_probes']} probes; {len(nc)} reached no equilibrium within the step cap"
+              + (f" (alpha_sigma = {', '.join(f'{x:.0f}' for x in nc)} deg: the sample fails under "
+                 f"these increments) and are left out of the W2 statistics" if nc else "")
+              + f"): W2 <= 0 for {_fmt_arcs(dm['cone_w2']) if dm['cone_w2'] else 'no direction'}; minimum W2 = {dm['min_w2']:.3f} at "
               f"{dm['alpha_min_w2']:.0f} deg (third quadrant: {dm['min_in_third_quadrant']}); low-W2 cone "
               f"(within 0.1 of the minimum) {_fmt_arcs(dm['low_w2_cone'])} deg; plastic zone "
               f"{_fmt_arcs(dm['plastic_zone'])} deg.")

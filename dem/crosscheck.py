@@ -85,23 +85,6 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
 
 
 # -- conclusions -------------------------------------------------------------------------------
-def _arcs(alpha, mask):
-    """Contiguous arcs (deg) of sorted alpha where mask holds."""
-    o = np.argsort(alpha)
-    a, m = np.asarray(alpha, float)[o], np.asarray(mask, bool)[o]
-    arcs, start, prev = [], None, None
-    for ak, mk in zip(a, m):
-        if mk and start is None:
-            start = ak
-        if not mk and start is not None:
-            arcs.append([float(start), float(prev)])
-            start = None
-        prev = ak
-    if start is not None:
-        arcs.append([float(start), float(a[-1])])
-    return arcs
-
-
 def _zone_stats(w2, micro, plastic):
     d = np.abs(np.asarray(w2) - np.asarray(micro))
     pl = np.asarray(plastic, bool)
@@ -111,13 +94,14 @@ def _zone_stats(w2, micro, plastic):
 
 def conclusions(h: dict, dem_rows: list | None, fem: dict | None) -> dict:
     """The paper's section-5 conclusions as numbers, for each model."""
+    from hmodel.probes import arcs
     sw = h["sweep"]
     c = {"hmodel": {}, "dem": None, "fem": None, "domain": []}
     hm = c["hmodel"]
     neg = sw.w2 <= 0
-    hm["cone_w2"] = _arcs(sw.alpha_sigma, neg)
-    hm["cone_w2sigma"] = _arcs(sw.alpha_sigma, sw.w2_sigma <= 0)
-    hm["plastic_zone"] = _arcs(sw.alpha_sigma, sw.plastic)
+    hm["cone_w2"] = arcs(sw.alpha_sigma, neg)
+    hm["cone_w2sigma"] = arcs(sw.alpha_sigma, sw.w2_sigma <= 0)
+    hm["plastic_zone"] = arcs(sw.alpha_sigma, sw.plastic)
     hm["min_w2"] = float(sw.w2.min())
     hm["alpha_min_w2"] = float(sw.alpha_sigma[np.argmin(sw.w2)])
     hm["cone_in_third_quadrant"] = bool(neg.any() and np.all((sw.d_sigma[neg, 0] < 0) & (sw.d_sigma[neg, 1] < 0)))
@@ -153,10 +137,10 @@ def conclusions(h: dict, dem_rows: list | None, fem: dict | None) -> dict:
         c["dem"] = {
             "n_probes": int(a.size), "n_not_converged": int((~conv).sum()),
             "alpha_not_converged": [float(x) for x in a[~conv]],
-            "cone_w2": _arcs(a[ok], negd[ok]), "min_w2": float(w2[k]), "alpha_min_w2": float(a[k]),
+            "cone_w2": arcs(a[ok], negd[ok]), "min_w2": float(w2[k]), "alpha_min_w2": float(a[k]),
             "min_in_third_quadrant": bool(180.0 <= a[k] <= 270.0),
-            "low_w2_cone": _arcs(a[ok], low[ok]),
-            "plastic_zone": _arcs(a, pl),
+            "low_w2_cone": arcs(a[ok], low[ok]),
+            "plastic_zone": arcs(a, pl),
             "micro_minus_macro": _zone_stats(w2[ok], mic[ok], pl[ok]),
             "micro_below_macro_in_plastic_zone": bool((pl & ok).any() and np.mean(mic[pl & ok] - w2[pl & ok]) < 0),
             "w2n_min": float(w2n[ok].min()),
@@ -178,6 +162,17 @@ def conclusions(h: dict, dem_rows: list | None, fem: dict | None) -> dict:
 
 
 # -- figures and report ------------------------------------------------------------------------
+def _angle_axes(ax):
+    """W2 against alpha_sigma: the frame shared by the side-by-side figures."""
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_xlim(0, 360)
+    ax.set_xticks(range(0, 361, 45))
+    ax.set_xlabel("alpha_sigma [deg] (tan = d sigma1 / d sigma2)")
+    ax.set_ylabel("normalized second-order work [-]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+
+
 def _figures(out, h, dem, fem):
     import matplotlib
     matplotlib.use("Agg")
@@ -256,13 +251,7 @@ def _figures(out, h, dem, fem):
         axs[1].plot(a[pl], np.array([r["w2"] for r in rows])[pl], "x", color="C3", label="plastic probe")
     axs[1].set_title("DEM (Fig. 16)")
     for ax in axs:
-        ax.axhline(0, color="k", lw=0.6)
-        ax.set_xlim(0, 360)
-        ax.set_xticks(range(0, 361, 45))
-        ax.set_xlabel("alpha_sigma [deg] (tan = ds1/ds2)")
-        ax.set_ylabel("normalized second-order work [-]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        _angle_axes(ax)
     figs["micro_macro"] = "fig_micro_macro.png"
     save_figure(fig, os.path.join(out, figs["micro_macro"]))
 
@@ -279,13 +268,7 @@ def _figures(out, h, dem, fem):
         axs[1].plot(a, [r["w2"] for r in rows], "k:", lw=0.8, label="W2 macro")
     axs[1].set_title("DEM (Fig. 17)")
     for ax in axs:
-        ax.axhline(0, color="k", lw=0.6)
-        ax.set_xlim(0, 360)
-        ax.set_xticks(range(0, 361, 45))
-        ax.set_xlabel("alpha_sigma [deg]")
-        ax.set_ylabel("normalized second-order work [-]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        _angle_axes(ax)
     figs["normal_tangential"] = "fig_normal_tangential.png"
     save_figure(fig, os.path.join(out, figs["normal_tangential"]))
 
@@ -296,10 +279,6 @@ def _figures(out, h, dem, fem):
     return figs
 
 
-def _fmt_arcs(arcs):
-    return ", ".join(f"[{a:.1f}, {b:.1f}]" for a, b in arcs) if arcs else "none"
-
-
 DEFAULT_SMALL = {"n": 1000, "rate": 0.05, "max_steps": 100_000}
 DEFAULT_FULL = {"n": 12000, "rate": 0.01, "max_steps": 400_000}
 
@@ -307,6 +286,7 @@ DEFAULT_FULL = {"n": 12000, "rate": 0.01, "max_steps": 400_000}
 def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
     """report.md: every figure embedded and the paper's section-5 conclusions in numbers."""
     from hmodel.io import atomic_open
+    from hmodel.probes import format_arcs
     hm, dm, fm = c["hmodel"], c["dem"], c["fem"]
     L = ["# Cross-check: H-model, finite elements and DEM", "",
          f"Configuration: {json.dumps(config)}", "",
@@ -330,18 +310,18 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
     L += ["## The paper's conclusions (section 5), as they come out of this run", ""]
     # 1. instability cone
     s = (f"1. **Instability cone in the third quadrant.** H-model: W2 <= 0 for alpha_sigma in "
-         f"{_fmt_arcs(hm['cone_w2'])} deg (third quadrant: {hm['cone_in_third_quadrant']}), "
+         f"{format_arcs(hm['cone_w2'])} deg (third quadrant: {hm['cone_in_third_quadrant']}), "
          f"minimum W2 = {hm['min_w2']:.3f} at {hm['alpha_min_w2']:.1f} deg, inside the plastic zone "
-         f"{_fmt_arcs(hm['plastic_zone'])} deg.")
+         f"{format_arcs(hm['plastic_zone'])} deg.")
     if dm:
         nc = dm["alpha_not_converged"]
         s += (f" DEM ({dm['n_probes']} probes; {len(nc)} reached no equilibrium within the step cap"
               + (f" (alpha_sigma = {', '.join(f'{x:.0f}' for x in nc)} deg: the sample fails under "
                  f"these increments) and are left out of the W2 statistics" if nc else "")
-              + f"): W2 <= 0 for {_fmt_arcs(dm['cone_w2']) if dm['cone_w2'] else 'no direction'}; minimum W2 = {dm['min_w2']:.3f} at "
+              + f"): W2 <= 0 for {format_arcs(dm['cone_w2']) if dm['cone_w2'] else 'no direction'}; minimum W2 = {dm['min_w2']:.3f} at "
               f"{dm['alpha_min_w2']:.0f} deg (third quadrant: {dm['min_in_third_quadrant']}); low-W2 cone "
-              f"(within 0.1 of the minimum) {_fmt_arcs(dm['low_w2_cone'])} deg; plastic zone "
-              f"{_fmt_arcs(dm['plastic_zone'])} deg.")
+              f"(within 0.1 of the minimum) {format_arcs(dm['low_w2_cone'])} deg; plastic zone "
+              f"{format_arcs(dm['plastic_zone'])} deg.")
     L.append(s)
     # 2. micro vs macro
     mm = hm["micro_minus_macro"]

@@ -16,7 +16,7 @@ from .experiment import (biaxial_columns, biaxial_test, bifurcation_domain, prob
                          state_at_eta)
 from .io import atomic_open, write_csv
 from .params import HParams
-from .probes import directional_sweep, stress_probes, tangent_criteria
+from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
 
 
 def add_param_options(ap: argparse.ArgumentParser):
@@ -77,27 +77,6 @@ def directional_analysis(P, args):
     return r, sA, sw
 
 
-def _ranges(alpha, mask):
-    """Contiguous arcs [start, end] (deg) of alpha_sigma where mask holds (sorted by angle)."""
-    o = np.argsort(alpha)
-    a, m = np.asarray(alpha)[o], np.asarray(mask, bool)[o]
-    arcs, start, prev = [], None, None
-    for ak, mk in zip(a, m):
-        if mk and start is None:
-            start = ak
-        if not mk and start is not None:
-            arcs.append([float(start), float(prev)])
-            start = None
-        prev = ak
-    if start is not None:
-        arcs.append([float(start), float(a[-1])])
-    # join an arc that wraps through 360 deg
-    if len(arcs) > 1 and m[0] and m[-1]:
-        first = arcs.pop(0)
-        arcs[-1] = [arcs[-1][0], first[1] + 360.0]
-    return arcs
-
-
 def cmd_probes(args):
     P = params_from(args)
     t0 = time.time()
@@ -123,9 +102,9 @@ def cmd_probes(args):
     summary = {
         "sigma2": args.sigma2, "eta_A": float(eta[-1]), "eps1_A": float(r.eps[-1, 0]),
         "p_A": float(p[-1]), "q_A": float(q[-1]), "n_probes": int(len(sw.alpha_eps)),
-        "plastic_zone_alpha_sigma": _ranges(sw.alpha_sigma, sw.plastic),
-        "cone_w2_alpha_sigma": _ranges(sw.alpha_sigma, sw.w2 <= 0),
-        "cone_w2sigma_alpha_sigma": _ranges(sw.alpha_sigma, sw.w2_sigma <= 0),
+        "plastic_zone_alpha_sigma": arcs(sw.alpha_sigma, sw.plastic),
+        "cone_w2_alpha_sigma": arcs(sw.alpha_sigma, sw.w2 <= 0),
+        "cone_w2sigma_alpha_sigma": arcs(sw.alpha_sigma, sw.w2_sigma <= 0),
         "min_w2": float(np.min(sw.w2)), "alpha_sigma_min_w2": float(sw.alpha_sigma[np.argmin(sw.w2)]),
         "min_w2n": float(np.min(sw.w2n)),
         "max_w2t_in_cone": float(np.max(sw.w2t[sw.w2 <= 0])) if np.any(sw.w2 <= 0) else None,
@@ -138,17 +117,13 @@ def cmd_probes(args):
         json.dump(summary, f, indent=2)
     print(f"point A: eta = {summary['eta_A']:.4f} at eps1 = {summary['eps1_A']:.4%} "
           f"({summary['n_probes']} strain probes, {time.time() - t0:.2f} s)")
-    print(f"plastic tensorial zone (alpha_sigma, deg): {_fmt_arcs(summary['plastic_zone_alpha_sigma'])}")
-    print(f"instability cone W2 <= 0: {_fmt_arcs(summary['cone_w2_alpha_sigma'])}; "
-          f"W2_sigma <= 0: {_fmt_arcs(summary['cone_w2sigma_alpha_sigma'])}")
+    print(f"plastic tensorial zone (alpha_sigma, deg): {format_arcs(summary['plastic_zone_alpha_sigma'])}")
+    print(f"instability cone W2 <= 0: {format_arcs(summary['cone_w2_alpha_sigma'])}; "
+          f"W2_sigma <= 0: {format_arcs(summary['cone_w2sigma_alpha_sigma'])}")
     print(f"min W2 = {summary['min_w2']:.4f} at alpha_sigma = {summary['alpha_sigma_min_w2']:.2f} deg; "
           f"min W2n = {summary['min_w2n']:.4f}")
     print(f"det(M) = {tc['det_M_cauchy']:.4g}, det(M_sym) = {tc['det_Msym_cauchy']:.4g} (Cauchy, loading pattern)")
     print(f"wrote {args.out}/probes.csv, stress_probes.csv, summary.json and Figs. 3, 6-9, 11")
-
-
-def _fmt_arcs(arcs):
-    return ", ".join(f"[{a:.1f}, {b:.1f}]" for a, b in arcs) if arcs else "none"
 
 
 def build_parser() -> argparse.ArgumentParser:

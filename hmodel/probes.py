@@ -17,7 +17,7 @@ from .material import HState, broadcast_state, to_voigt, update_full
 from .params import HParams
 
 __all__ = ["ProbeResult", "StressProbeResult", "strain_probes", "directional_sweep",
-           "stress_probes", "tangent_criteria", "min_w2"]
+           "stress_probes", "tangent_criteria", "min_w2", "arcs", "format_arcs"]
 
 DEFAULT_PROBE_NORM = 1e-6   # |d_eps| of a strain probe: a tenth of the default path step
 
@@ -134,6 +134,33 @@ def strain_probes(state: HState, params: HParams, alpha_eps_deg, norm: float = D
         w2=w2, w2_sigma=w2_sigma, w2_V=w2_V, w2_g=w2_g, w2_micro=w2n + w2t, w2n=w2n, w2t=w2t,
         w2_hex=w2_hex, plastic=np.any(inc.state.sliding & closed, axis=-1),
         n_sliding=np.sum(inc.state.sliding & closed, axis=-1), n_open=np.sum(inc.state.is_open, axis=-1))
+
+
+def arcs(alpha_deg, mask) -> list:
+    """Contiguous arcs [start, end] [deg] of the directions ``alpha_deg`` where ``mask`` holds,
+    walking the directions in increasing angle (e.g. the plastic zone or the instability cone);
+    an arc that runs through 360 deg is joined into one ending above 360."""
+    o = np.argsort(alpha_deg)
+    a, m = np.asarray(alpha_deg, float)[o], np.asarray(mask, bool)[o]
+    out, start, prev = [], None, None
+    for ak, mk in zip(a, m):
+        if mk and start is None:
+            start = ak
+        if not mk and start is not None:
+            out.append([float(start), float(prev)])
+            start = None
+        prev = ak
+    if start is not None:
+        out.append([float(start), float(a[-1])])
+    if len(out) > 1 and m[0] and m[-1]:
+        first = out.pop(0)
+        out[-1] = [out[-1][0], first[1] + 360.0]
+    return out
+
+
+def format_arcs(arc_list) -> str:
+    """'[a, b], [c, d]' [deg] for a list of arcs, or 'none'."""
+    return ", ".join(f"[{a:.1f}, {b:.1f}]" for a, b in arc_list) if arc_list else "none"
 
 
 def _wrap180(x):

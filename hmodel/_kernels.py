@@ -58,12 +58,7 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
         n1 = N1[p, i]
         t1 = T1[p, i]
         n2 = N2[p, i]
-        ca = math.cos(a)
-        sa = math.sin(a)
-        slide = False
-        xi = 0.0
         closed_end = True
-        # derivatives of (dd1, dd2, da) w.r.t. v; x = (dd1, dd2, da)
         if was_open[p, i]:
             # open hexagon: no force; it closes when (l1, l2) re-enters the set reachable with
             # d1, d2 <= 2 r_g, i.e. l2 <= 4 r_g and l1 <= 2 r_g + sqrt(16 r_g^2 - l2^2)
@@ -73,6 +68,27 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
             if nl2_ < 2.0 * two_r and nl1_ > two_r:
                 if nl1_ <= two_r + math.sqrt(4.0 * two_r * two_r - nl2_ * nl2_):
                     closed_end = True
+            # stays open: no force, no stiffness, no second-order work; unless an extra
+            # contact (1-4 or 2-6) touches, nothing but the lengths changes
+            if (not closed_end and L1 >= two_r and L2 >= two_r and nl1_ >= two_r
+                    and nl2_ >= two_r):
+                o_d1[p, i] = two_r
+                o_d2[p, i] = two_r
+                o_alpha[p, i] = a
+                o_N1[p, i] = 0.0
+                o_T1[p, i] = 0.0
+                o_N2[p, i] = 0.0
+                o_l1[p, i] = nl1_
+                o_l2[p, i] = nl2_
+                o_sliding[p, i] = False
+                o_open[p, i] = True
+                continue
+        ca = math.cos(a)
+        sa = math.sin(a)
+        slide = False
+        xi = 0.0
+        # derivatives of (dd1, dd2, da) w.r.t. v; x = (dd1, dd2, da)
+        if was_open[p, i]:
             if closed_end:
                 # Close in equilibrium with zero tangential force: N2 = N1 cos(a), i.e.
                 # f(a) = 2 r (1 - cos a) - l1 + 1.5 l2 cot(a) = 0, decreasing in a; f = 0 on the
@@ -113,20 +129,7 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
                 dN2_0 = -kn * x20; dN2_1 = -kn * x21; dN2_2 = -kn * x22
                 dT1_0 = 0.0; dT1_1 = 0.0; dT1_2 = 0.0
             else:
-                # stays open: no force, no stiffness, no second-order work; unless an extra
-                # contact (1-4 or 2-6) touches, nothing but the lengths changes
-                if L1 >= two_r and L2 >= two_r and nl1_ >= two_r and nl2_ >= two_r:
-                    o_d1[p, i] = two_r
-                    o_d2[p, i] = two_r
-                    o_alpha[p, i] = a
-                    o_N1[p, i] = 0.0
-                    o_T1[p, i] = 0.0
-                    o_N2[p, i] = 0.0
-                    o_l1[p, i] = nl1_
-                    o_l2[p, i] = nl2_
-                    o_sliding[p, i] = False
-                    o_open[p, i] = True
-                    continue
+                # stays open next to an extra contact (1-4 or 2-6): forces zero, lengths follow
                 da = 0.0
                 dd1 = two_r - D1
                 dd2 = two_r - D2
@@ -188,8 +191,17 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
             dN2_0 = 0.0; dN2_1 = 0.0; dN2_2 = 0.0
             dT1_0 = 0.0; dT1_1 = 0.0; dT1_2 = 0.0
         na = a + da
-        cna = math.cos(na)
-        sna = math.sin(na)
+        if abs(da) < 0.01:
+            # rotate (cos a, sin a) by the small d_alpha: Taylor series exact to round-off for
+            # |da| < 0.01 (next terms < 3e-24), half the transcendental calls of the kernel
+            z = da * da
+            sd = da * (1.0 - z / 6.0 * (1.0 - z / 20.0 * (1.0 - z / 42.0)))
+            cd = 1.0 - z / 2.0 * (1.0 - z / 12.0 * (1.0 - z / 30.0 * (1.0 - z / 56.0)))
+            cna = ca * cd - sa * sd
+            sna = sa * cd + ca * sd
+        else:
+            cna = math.cos(na)
+            sna = math.sin(na)
         nl1 = L1 + dl1
         nl2 = L2 + dl2
         # extra contacts 1-4 (one pair) and 2-6, 3-5 (two pairs), purely geometric

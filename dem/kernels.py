@@ -49,69 +49,57 @@ def cell_sort(x, lo_x, lo_y, cell, ncx, ncy):
     return counts, part, cid
 
 
+@njit(cache=True)
+def _neighbours_of(i, x, r, skin, start, part, cid, ncx, ncy, pi, pj, k, fill):
+    """Scan the 3x3 cells around particle i for partners j > i within the skin. With
+    ``fill`` the pairs are written from index k on; returns k plus the number found."""
+    c = cid[i]
+    cx = c % ncx
+    cy = c // ncx
+    for oy in range(-1, 2):
+        yy = cy + oy
+        if yy < 0 or yy >= ncy:
+            continue
+        for ox in range(-1, 2):
+            xx = cx + ox
+            if xx < 0 or xx >= ncx:
+                continue
+            cc = yy * ncx + xx
+            for s in range(start[cc], start[cc + 1]):
+                j = part[s]
+                if j <= i:
+                    continue
+                dx = x[j, 0] - x[i, 0]
+                dy = x[j, 1] - x[i, 1]
+                rc = r[i] + r[j] + skin
+                if dx * dx + dy * dy < rc * rc:
+                    if fill:
+                        pi[k] = i
+                        pj[k] = j
+                    k += 1
+    return k
+
+
 @njit(cache=True, parallel=True)
 def build_pairs(x, r, skin, lo_x, lo_y, cell, ncx, ncy):
     """Pairs (i<j) whose gap is below `skin`: |x_i - x_j| < r_i + r_j + skin.
 
     Cell side must be >= 2 r_max + skin.  Returns pi, pj (int32), sorted by (i, j).
+    Two passes over the same scan: count per particle, then fill at the prefix offsets.
     """
     n = x.shape[0]
     start, part, cid = cell_sort(x, lo_x, lo_y, cell, ncx, ncy)
     cnt = np.zeros(n + 1, np.int64)
+    dummy = np.empty(0, np.int32)
     for i in prange(n):
-        c = cid[i]
-        cx = c % ncx
-        cy = c // ncx
-        k = 0
-        for oy in range(-1, 2):
-            yy = cy + oy
-            if yy < 0 or yy >= ncy:
-                continue
-            for ox in range(-1, 2):
-                xx = cx + ox
-                if xx < 0 or xx >= ncx:
-                    continue
-                cc = yy * ncx + xx
-                for s in range(start[cc], start[cc + 1]):
-                    j = part[s]
-                    if j <= i:
-                        continue
-                    dx = x[j, 0] - x[i, 0]
-                    dy = x[j, 1] - x[i, 1]
-                    rc = r[i] + r[j] + skin
-                    if dx * dx + dy * dy < rc * rc:
-                        k += 1
-        cnt[i + 1] = k
+        cnt[i + 1] = _neighbours_of(i, x, r, skin, start, part, cid, ncx, ncy, dummy, dummy, 0, False)
     for i in range(n):
         cnt[i + 1] += cnt[i]
     npairs = cnt[n]
     pi = np.empty(npairs, np.int32)
     pj = np.empty(npairs, np.int32)
     for i in prange(n):
-        c = cid[i]
-        cx = c % ncx
-        cy = c // ncx
-        k = cnt[i]
-        for oy in range(-1, 2):
-            yy = cy + oy
-            if yy < 0 or yy >= ncy:
-                continue
-            for ox in range(-1, 2):
-                xx = cx + ox
-                if xx < 0 or xx >= ncx:
-                    continue
-                cc = yy * ncx + xx
-                for s in range(start[cc], start[cc + 1]):
-                    j = part[s]
-                    if j <= i:
-                        continue
-                    dx = x[j, 0] - x[i, 0]
-                    dy = x[j, 1] - x[i, 1]
-                    rc = r[i] + r[j] + skin
-                    if dx * dx + dy * dy < rc * rc:
-                        pi[k] = i
-                        pj[k] = j
-                        k += 1
+        _neighbours_of(i, x, r, skin, start, part, cid, ncx, ncy, pi, pj, cnt[i], True)
         # insertion sort of this particle's segment by j (segments are short)
         for a in range(cnt[i] + 1, cnt[i + 1]):
             v = pj[a]

@@ -23,36 +23,32 @@ def _mark(ax, x, y, label="A"):
     ax.annotate(label, (x, y), textcoords="offset points", xytext=(6, -12), color="C3")
 
 
-def fig_q_eps1(curves, path, point_a=None, title="Drained biaxial test: deviatoric stress"):
-    """Fig. 4 / 13: q = s1 - s2 [kPa] against eps1 [%]. ``curves``: list of (label, eps1, q)."""
+def _strain_curves(curves, path, point_a, title, yscale, ylabel):
+    """One quantity (scaled by ``yscale``) of drained-test curves against eps1 [%]."""
     fig, ax = plt.subplots(figsize=(6, 4.2))
-    for label, e1, q in curves:
-        ax.plot(100 * np.asarray(e1), np.asarray(q) / 1e3, label=label)
+    for label, e1, y in curves:
+        ax.plot(100 * np.asarray(e1), yscale * np.asarray(y), label=label)
     if point_a is not None:
-        _mark(ax, 100 * point_a[0], point_a[1] / 1e3)
+        _mark(ax, 100 * point_a[0], yscale * point_a[1])
     ax.set_xlabel(r"axial strain $\varepsilon_1$ [%]")
-    ax.set_ylabel(r"deviatoric stress $q = \sigma_1 - \sigma_2$ [kPa]")
+    ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
     if len(curves) > 1:
         ax.legend()
     save_figure(fig, path)
+
+
+def fig_q_eps1(curves, path, point_a=None, title="Drained biaxial test: deviatoric stress"):
+    """Fig. 4 / 13: q = s1 - s2 [kPa] against eps1 [%]. ``curves``: list of (label, eps1, q)."""
+    _strain_curves(curves, path, point_a, title, 1e-3,
+                   r"deviatoric stress $q = \sigma_1 - \sigma_2$ [kPa]")
 
 
 def fig_epsv_eps1(curves, path, point_a=None, title="Drained biaxial test: volumetric strain"):
     """Fig. 5 / 14: eps_v = eps1 + eps2 [%] (compression positive) against eps1 [%]."""
-    fig, ax = plt.subplots(figsize=(6, 4.2))
-    for label, e1, ev in curves:
-        ax.plot(100 * np.asarray(e1), 100 * np.asarray(ev), label=label)
-    if point_a is not None:
-        _mark(ax, 100 * point_a[0], 100 * point_a[1])
-    ax.set_xlabel(r"axial strain $\varepsilon_1$ [%]")
-    ax.set_ylabel(r"volumetric strain $\varepsilon_v = \varepsilon_1 + \varepsilon_2$ [%] (contraction > 0)")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    if len(curves) > 1:
-        ax.legend()
-    save_figure(fig, path)
+    _strain_curves(curves, path, point_a, title, 100.0,
+                   r"volumetric strain $\varepsilon_v = \varepsilon_1 + \varepsilon_2$ [%] (contraction > 0)")
 
 
 def fig_probes(pr, path):

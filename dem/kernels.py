@@ -351,32 +351,129 @@ def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thi
 
 
 # --------------------------------------------------------------------------------------
+# One thread: contact law, gather and integration fused in two passes
+# --------------------------------------------------------------------------------------
+@njit(cache=True)
+def forces_and_integrate_serial(x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet,
+                                x_ref, disp2, kn, kt, mu, cap_on, beta, damping, dt):
+    """One time step of ``pair_forces`` + ``integrate`` on one thread, bit-identical to them.
+
+    The pair loop scatters each contact force straight into fnet (N,3) instead of storing it
+    per pair and gathering it through the incidence list: for every particle the additions
+    come in increasing pair index, the order of the incidence list, and a - b equals
+    a + (-1.0) b exactly, so the sums are the same to the bit.  It saves the per-pair force
+    arrays and the random reads of the gather.  ``wall_forces`` must have filled fext.
+    Returns the largest squared displacement since the last rebuild [m^2].
+    """
+    n = x.shape[0]
+    for p in range(n):
+        fnet[p, 0] = fext[p, 0]
+        fnet[p, 1] = fext[p, 1]
+        fnet[p, 2] = 0.0
+    for k in range(pi.shape[0]):
+        i = pi[k]
+        j = pj[k]
+        dx = x[j, 0] - x[i, 0]
+        dy = x[j, 1] - x[i, 1]
+        d2 = dx * dx + dy * dy
+        rs = r[i] + r[j]
+        if d2 >= rs * rs:
+            # contact open: history is lost (cohesionless); a zero force adds nothing
+            ft[k] = 0.0
+            continue
+        d = math.sqrt(d2)
+        nx = dx / d
+        ny = dy / d
+        tx = -ny
+        ty = nx
+        dvx = v[j, 0] - v[i, 0]
+        dvy = v[j, 1] - v[i, 1]
+        fn = kn * (rs - d)
+        if beta > 0.0:
+            meff = m[i] * m[j] / (m[i] + m[j])
+            fn -= 2.0 * beta * math.sqrt(kn * meff) * (dvx * nx + dvy * ny)
+            if fn < 0.0:
+                fn = 0.0
+        vt = dvx * tx + dvy * ty - (w[i] * r[i] + w[j] * r[j])
+        f_t = ft[k] + kt * vt * dt
+        if cap_on:
+            lim = mu * fn
+            if f_t > lim:
+                f_t = lim
+            elif f_t < -lim:
+                f_t = -lim
+        ft[k] = f_t
+        fx = -fn * nx + f_t * tx
+        fy = -fn * ny + f_t * ty
+        fnet[i, 0] += fx
+        fnet[i, 1] += fy
+        fnet[i, 2] += f_t
+        fnet[j, 0] -= fx
+        fnet[j, 1] -= fy
+        fnet[j, 2] += f_t
+    dmax = 0.0
+    for p in range(n):
+        fx = fnet[p, 0]
+        fy = fnet[p, 1]
+        tq = fnet[p, 2] * r[p]
+        fnet[p, 2] = tq
+        if damping > 0.0:
+            fx -= damping * abs(fx) * np.sign(v[p, 0])
+            fy -= damping * abs(fy) * np.sign(v[p, 1])
+            tq -= damping * abs(tq) * np.sign(w[p])
+        v[p, 0] += fx / m[p] * dt
+        v[p, 1] += fy / m[p] * dt
+        w[p] += tq / inertia[p] * dt
+        x[p, 0] += v[p, 0] * dt
+        x[p, 1] += v[p, 1] * dt
+        theta[p] += w[p] * dt
+        ddx = x[p, 0] - x_ref[p, 0]
+        ddy = x[p, 1] - x_ref[p, 1]
+        dd = ddx * ddx + ddy * ddy
+        disp2[p] = dd
+        if dd > dmax:
+            dmax = dd
+    return dmax
+
+
+# --------------------------------------------------------------------------------------
 # Driver: many steps in one call
 # --------------------------------------------------------------------------------------
 @njit(cache=True)
 def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, fpx, fpy, inc_off, inc_ent,
             cand_off, cand, fext, fnet, x_ref, walls_ref, disp2, walls, prev, wF, wK,
             mode, s_from, s_to, ramp_start, ramp_len, rate, len0, step0,
-            kn, kt, mu, cap_on, beta, damping, dt, thickness, gain, smoothing, vmax, half_skin):
+            kn, kt, mu, cap_on, beta, damping, dt, thickness, gain, smoothing, vmax, half_skin,
+            serial):
     """Run up to nsteps time steps; stop early when the neighbour list must be rebuilt.
 
     Returns the number of steps done.  step0 is the global step counter at entry (the
     stress ramp of the servo is a function of it, so a chunked run equals a single run).
+    ``serial``: use the fused one-thread kernel (same results to the bit as the parallel
+    kernels, which it would otherwise run on one thread with their scheduling overhead).
     """
     hs2 = half_skin * half_skin
     n = x.shape[0]
     done = 0
+    dmax = 0.0
     for s in range(nsteps):
-        pair_forces(x, v, w, r, m, pi, pj, ft, fpx, fpy, kn, kt, mu, cap_on, beta, dt)
-        wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
+        if serial:
+            wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
+            dmax = forces_and_integrate_serial(x, v, w, theta, r, m, inertia, pi, pj, ft, fext,
+                                               fnet, x_ref, disp2, kn, kt, mu, cap_on, beta,
+                                               damping, dt)
+        else:
+            pair_forces(x, v, w, r, m, pi, pj, ft, fpx, fpy, kn, kt, mu, cap_on, beta, dt)
+            wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
         gstep = step0 + s
         if ramp_len > 0:
             rt = (gstep - ramp_start + 1) / ramp_len
             rt = min(max(rt, 0.0), 1.0)
         else:
             rt = 1.0
-        integrate(x, v, w, theta, r, m, inertia, inc_off, inc_ent, fpx, fpy, ft, fext, fnet,
-                  x_ref, disp2, damping, dt)
+        if not serial:
+            integrate(x, v, w, theta, r, m, inertia, inc_off, inc_ent, fpx, fpy, ft, fext, fnet,
+                      x_ref, disp2, damping, dt)
         servo_walls(walls, wF, wK, mode, s_from, s_to, rt, rate, len0, prev, thickness,
                     gain, smoothing, vmax, dt)
         done += 1
@@ -384,7 +481,9 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, fpx, fpy, inc_off
         for wi in range(4):
             if abs(walls[wi] - walls_ref[wi]) > half_skin:
                 rebuild = True
-        if not rebuild:
+        if serial:
+            rebuild = rebuild or dmax > hs2
+        elif not rebuild:
             for p in range(n):
                 if disp2[p] > hs2:
                     rebuild = True

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from . import kernels
@@ -85,6 +86,8 @@ class Simulation:
         self._alloc_pair_buffers()
         self.n_rebuilds = 0
         self.vmax_override = None  # wall speed cap override [m/s] (compaction only)
+        # fused one-thread kernel: None = whenever Numba runs one thread (same bits either way)
+        self.fused_serial = None
 
     # ------------------------------------------------------------------------------
     @classmethod
@@ -131,6 +134,8 @@ class Simulation:
         p = self.params
         mode, s_from, s_to, ramp_start, ramp_len, rate, len0 = self.control.arrays()
         left = int(nsteps)
+        serial = (numba.get_num_threads() == 1 if self.fused_serial is None
+                  else bool(self.fused_serial))
         while left > 0:
             pl = self.pairs
             done = kernels.advance(
@@ -142,7 +147,7 @@ class Simulation:
                 p.kn, p.kt, self.mu, self.cap_on, p.normal_damping_ratio, self.damping,
                 self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
                 self.vmax_override or p.servo_vmax,
-                0.5 * p.skin)
+                0.5 * p.skin, serial)
             left -= done
             self.step += done
             self.time = self.step * self.dt

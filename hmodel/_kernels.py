@@ -1,6 +1,8 @@
 """Numba kernels of the H-microdirectional model (the only module with @njit).
 
-Layout: every hexagon field is a C-contiguous array of shape (npts, n_dir); strains and stresses
+Layout: every hexagon field is a C-contiguous array of shape (npts, n_dir), in the order of
+``material.HEX_FIELDS`` (d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a: the cos and sin of alpha
+are carried in the state, so a closed hexagon costs no trigonometric call); strains and stresses
 are (npts, 3) in the order (11, 22, 12) with tensor (not engineering) shear; tangents are
 (npts, 3, 3) with T[p, a, b] = d sigma_a / d v_b, v = (de11, de22, de12), de12 = de21.
 
@@ -16,9 +18,9 @@ from numba import njit, prange
 
 
 @njit(cache=True)
-def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
+def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                  cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
-                 o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                 o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                  o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
     """Update the n_dir hexagons of point ``p`` (one iteration of the point loop). The point
     loop lives in the two drivers below, so that the parallel one has a trivial body (Numba's
@@ -80,11 +82,14 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
                 o_N2[p, i] = 0.0
                 o_l1[p, i] = nl1_
                 o_l2[p, i] = nl2_
+                o_cos_a[p, i] = cos_a[p, i]
+                o_sin_a[p, i] = sin_a[p, i]
                 o_sliding[p, i] = False
                 o_open[p, i] = True
                 continue
-        ca = math.cos(a)
-        sa = math.sin(a)
+        # cos, sin of the start angle: carried in the state (no transcendental call per step)
+        ca = cos_a[p, i]
+        sa = sin_a[p, i]
         slide = False
         xi = 0.0
         # derivatives of (dd1, dd2, da) w.r.t. v; x = (dd1, dd2, da)
@@ -288,6 +293,8 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
         o_N2[p, i] = nN2
         o_l1[p, i] = nl1
         o_l2[p, i] = nl2
+        o_cos_a[p, i] = cna
+        o_sin_a[p, i] = sna
         o_sliding[p, i] = slide
         o_open[p, i] = not closed_end
     # volumes: V = V0 det(I - eps) at the start, V' at the end of the step
@@ -339,35 +346,35 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
 
 
 @njit(cache=True)
-def update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
+def update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                   cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
-                  o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                  o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                   o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
     """The update of every point, one thread (arguments: see the module docstring)."""
     for p in range(d1.shape[0]):
-        _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
+        _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                       cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
-                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
 
 
 @njit(cache=True, parallel=True)
-def update_parallel(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
+def update_parallel(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                     cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
-                    o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                    o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                     o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
     """The same, points spread over threads (each point is independent: same results)."""
     for p in prange(d1.shape[0]):
-        _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
+        _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                       cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
-                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
 
 
 def allocate_outputs(npts, ndir):
     """Output arrays of the update kernel, in its argument order."""
     f = lambda: np.empty((npts, ndir))
-    return (f(), f(), f(), f(), f(), f(), f(), f(),
+    return (f(), f(), f(), f(), f(), f(), f(), f(), f(), f(),
             np.empty((npts, ndir), dtype=np.bool_), np.empty((npts, ndir), dtype=np.bool_),
             np.empty((npts, 3)), np.empty((npts, 3, 3)), np.empty((npts, 3, 3)),
             np.empty((npts, 3)), np.empty((npts, 3)),
@@ -375,10 +382,10 @@ def allocate_outputs(npts, ndir):
 
 
 @njit(cache=True)
-def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
+def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0,
                       cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                       strain_controlled, de_start, target, tol, max_iter,
-                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
     """Newton with backtracking on the stress-controlled components of one point (npts = 1).
 
@@ -400,13 +407,14 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
     b_d1 = np.empty((1, ndir)); b_d2 = np.empty((1, ndir)); b_al = np.empty((1, ndir))
     b_N1 = np.empty((1, ndir)); b_T1 = np.empty((1, ndir)); b_N2 = np.empty((1, ndir))
     b_l1 = np.empty((1, ndir)); b_l2 = np.empty((1, ndir))
+    b_ca = np.empty((1, ndir)); b_sa = np.empty((1, ndir))
     b_sl = np.empty((1, ndir), dtype=np.bool_); b_op = np.empty((1, ndir), dtype=np.bool_)
     b_sig = np.empty((1, 3)); b_tan = np.empty((1, 3, 3)); b_tanL = np.empty((1, 3, 3))
     b_dPi = np.empty((1, 3)); b_T3 = np.empty((1, 3))
     b_w2 = np.empty(1); b_w2n = np.empty(1); b_w2t = np.empty(1)
-    update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, de,
+    update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                   cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
-                  o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_sliding, o_open,
+                  o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                   o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
     rn = 0.0
     for k in range(nfree):
@@ -431,9 +439,9 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
         while True:
             for a in range(nfree):
                 trial[0, free[a]] = de[0, free[a]] - lam * step[a]
-            update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0, trial,
+            update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, trial,
                           cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
-                          b_d1, b_d2, b_al, b_N1, b_T1, b_N2, b_l1, b_l2, b_sl, b_op,
+                          b_d1, b_d2, b_al, b_N1, b_T1, b_N2, b_l1, b_l2, b_ca, b_sa, b_sl, b_op,
                           b_sig, b_tan, b_tanL, b_dPi, b_T3, b_w2, b_w2n, b_w2t)
             rt = 0.0
             for a in range(nfree):
@@ -446,7 +454,8 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
         rn = rt
         o_d1[:, :] = b_d1; o_d2[:, :] = b_d2; o_alpha[:, :] = b_al
         o_N1[:, :] = b_N1; o_T1[:, :] = b_T1; o_N2[:, :] = b_N2
-        o_l1[:, :] = b_l1; o_l2[:, :] = b_l2; o_sliding[:, :] = b_sl; o_open[:, :] = b_op
+        o_l1[:, :] = b_l1; o_l2[:, :] = b_l2; o_cos_a[:, :] = b_ca; o_sin_a[:, :] = b_sa
+        o_sliding[:, :] = b_sl; o_open[:, :] = b_op
         o_sig[:, :] = b_sig; o_tan[:, :, :] = b_tan; o_tanL[:, :, :] = b_tanL
         o_dPi[:, :] = b_dPi; o_T3[:, :] = b_T3; o_w2[:] = b_w2; o_w2n[:] = b_w2n; o_w2t[:] = b_w2t
     if rn <= tol:
@@ -455,7 +464,7 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
 
 
 @njit(cache=True)
-def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
+def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0,
                 cos_t, sin_t, omega, kn, kt, mu, r_g,
                 strain_controlled, d_eps, sig_start, d_sigma, k_start, n_steps, guess, tol, max_iter,
                 h_de, h_sig, h_it, h_nsl, h_nop, last_sliding):
@@ -466,7 +475,7 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
     (fewer than ``n_steps`` when a step failed), the last residual and the failure code of
     ``mixed_step_single`` (0 if none)."""
     ndir = d1.shape[1]
-    out_h = [np.empty((1, ndir)) for _ in range(8)]
+    out_h = [np.empty((1, ndir)) for _ in range(10)]
     o_sl = np.empty((1, ndir), dtype=np.bool_)
     o_op = np.empty((1, ndir), dtype=np.bool_)
     o_sig = np.empty((1, 3)); o_tan = np.empty((1, 3, 3)); o_tanL = np.empty((1, 3, 3))
@@ -480,17 +489,18 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
             target[c] = sig_start[c] + (k_start + k + 1) * d_sigma[c]
             if strain_controlled[c]:
                 de0[c] = d_eps[c]
-        it, rn, de = mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, was_open, eps, V0,
+        it, rn, de = mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0,
                                        cos_t, sin_t, omega, kn, kt, mu, r_g, True, False,
                                        strain_controlled, de0, target, tol, max_iter,
                                        out_h[0], out_h[1], out_h[2], out_h[3], out_h[4], out_h[5],
-                                       out_h[6], out_h[7], o_sl, o_op,
+                                       out_h[6], out_h[7], out_h[8], out_h[9], o_sl, o_op,
                                        o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
         if it < 0:
             return k, rn, it
         d1[:, :] = out_h[0]; d2[:, :] = out_h[1]; alpha[:, :] = out_h[2]
         N1[:, :] = out_h[3]; T1[:, :] = out_h[4]; N2[:, :] = out_h[5]
-        l1[:, :] = out_h[6]; l2[:, :] = out_h[7]; was_open[:, :] = o_op
+        l1[:, :] = out_h[6]; l2[:, :] = out_h[7]; cos_a[:, :] = out_h[8]; sin_a[:, :] = out_h[9]
+        was_open[:, :] = o_op
         last_sliding[:, :] = o_sl
         for c in range(3):
             eps[0, c] += de[0, c]

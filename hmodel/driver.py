@@ -206,10 +206,11 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
 
 def _path_result(state, work, sliding, sig0, h_de, h_sig, h_it, h_nsl, h_nop) -> PathResult:
     n = state.n_dir
-    d1, d2, al, N1, T1, N2, l1, l2, was_open, eps, V0 = work
+    d1, d2, al, N1, T1, N2, l1, l2, ca, sa, was_open, eps, V0 = work
     last_sig = h_sig[-1] if len(h_sig) else sig0
     final = HState(d1=d1.reshape(n), d2=d2.reshape(n), alpha=al.reshape(n), N1=N1.reshape(n),
                    T1=T1.reshape(n), N2=N2.reshape(n), l1=l1.reshape(n), l2=l2.reshape(n),
+                   cos_alpha=ca.reshape(n), sin_alpha=sa.reshape(n),
                    eps=_tensor(eps[0]), stress=_tensor(last_sig), V0=np.array(float(V0[0])),
                    sliding=sliding.reshape(n).copy(), is_open=was_open.reshape(n).copy())
     return PathResult(

@@ -22,7 +22,7 @@ from . import _kernels
 from .params import HParams
 
 __all__ = [
-    "HState", "Increment", "reference_state", "update", "update_full", "broadcast_state",
+    "HState", "HEX_FIELDS", "Increment", "reference_state", "update", "update_full", "broadcast_state",
     "to_voigt", "from_voigt", "tangent_from_voigt", "take_points",
 ]
 
@@ -34,7 +34,10 @@ class HState(NamedTuple):
     """State of a batch of H-model material points (immutable record).
 
     Hexagon fields, shape (*batch, n_dir): d1, d2 [m] branch lengths, alpha [rad] opening angle,
-    N1, T1, N2 [N] contact forces, l1, l2 [m] hexagon lengths along n and t (Eqs. 17-19).
+    N1, T1, N2 [N] contact forces, l1, l2 [m] hexagon lengths along n and t (Eqs. 17-19),
+    cos_alpha, sin_alpha [-] cos and sin of alpha, carried along so that the kernel needs no
+    trigonometric call for a closed hexagon (it rotates them by the small angle increment; they
+    agree with np.cos(alpha), np.sin(alpha) to round-off). ``HEX_FIELDS`` lists these 10 fields.
     eps : (2, 2, *batch) total strain since the zero-force reference (for the volume).
     stress : (2, 2, *batch) Cauchy stress [Pa], compression positive.
     V0 : (*batch,) reference volume [m^3] of the average hexagon, h sum_i omega_i l1_i l2_i.
@@ -49,6 +52,8 @@ class HState(NamedTuple):
     N2: np.ndarray
     l1: np.ndarray
     l2: np.ndarray
+    cos_alpha: np.ndarray
+    sin_alpha: np.ndarray
     eps: np.ndarray
     stress: np.ndarray
     V0: np.ndarray
@@ -68,6 +73,11 @@ class HState(NamedTuple):
         """Current volume V = V0 det(I - eps) [m^3], shape (*batch,)."""
         e = self.eps
         return self.V0 * ((1.0 - e[0, 0]) * (1.0 - e[1, 1]) - e[0, 1] * e[1, 0])
+
+
+# The float hexagon fields, shape (*batch, n_dir), in the kernel's argument order.
+HEX_FIELDS = HState._fields[:10]
+assert HEX_FIELDS[-1] == "sin_alpha"
 
 
 class Increment(NamedTuple):
@@ -144,7 +154,8 @@ def reference_state(params: HParams, batch_shape: tuple = ()) -> HState:
     V0 = params.h * float(np.sum(params.omega)) * l1 * l2
     return HState(
         d1=full(2 * r), d2=full(2 * r), alpha=full(a0), N1=full(0), T1=full(0), N2=full(0),
-        l1=full(l1), l2=full(l2), eps=np.zeros((2, 2) + batch_shape),
+        l1=full(l1), l2=full(l2), cos_alpha=full(np.cos(a0)), sin_alpha=full(np.sin(a0)),
+        eps=np.zeros((2, 2) + batch_shape),
         stress=np.zeros((2, 2) + batch_shape), V0=np.full(batch_shape, V0),
         sliding=np.zeros(shape, dtype=bool), is_open=np.zeros(shape, dtype=bool))
 
@@ -157,7 +168,7 @@ def broadcast_state(state: HState, batch_shape: tuple) -> HState:
     hexf = lambda a: np.ascontiguousarray(np.broadcast_to(a, batch_shape + a.shape))
     tens = lambda a: np.ascontiguousarray(np.broadcast_to(a.reshape(2, 2, *([1] * len(batch_shape))),
                                                           (2, 2) + batch_shape))
-    return HState(*(hexf(getattr(state, f)) for f in HState._fields[:8]),
+    return HState(*(hexf(getattr(state, f)) for f in HEX_FIELDS),
                   eps=tens(state.eps), stress=tens(state.stress),
                   V0=np.full(batch_shape, float(state.V0)),
                   sliding=hexf(state.sliding), is_open=hexf(state.is_open))
@@ -169,7 +180,7 @@ def take_points(state: HState, index) -> HState:
     idx = np.asarray(index)
     hexf = lambda a: a.reshape(-1, n)[idx]
     tens = lambda a: a.reshape(2, 2, -1)[:, :, idx]
-    return HState(*(hexf(getattr(state, f)) for f in HState._fields[:8]),
+    return HState(*(hexf(getattr(state, f)) for f in HEX_FIELDS),
                   eps=tens(state.eps), stress=tens(state.stress), V0=state.V0.reshape(-1)[idx],
                   sliding=hexf(state.sliding), is_open=hexf(state.is_open))
 
@@ -211,13 +222,13 @@ def _material_args(params: HParams):
 
 
 def kernel_args(state: HState, params: HParams):
-    """The state as the kernel takes it: 8 hexagon arrays (npts, n_dir), was_open, eps (npts, 3),
-    V0 (npts,); the last entry repeats eps for the caller's convenience."""
+    """The state as the kernel takes it: the 10 ``HEX_FIELDS`` arrays (npts, n_dir), was_open,
+    eps (npts, 3), V0 (npts,); the last entry repeats eps for the caller's convenience."""
     n = state.n_dir
     npts = int(np.prod(state.batch_shape, dtype=int))
     hexf = lambda a: np.ascontiguousarray(a, dtype=float).reshape(npts, n)
     eps = to_voigt(state.eps)
-    return (*(hexf(getattr(state, f)) for f in HState._fields[:8]),
+    return (*(hexf(getattr(state, f)) for f in HEX_FIELDS),
             np.ascontiguousarray(state.is_open, dtype=np.bool_).reshape(npts, n),
             eps, np.ascontiguousarray(state.V0, dtype=float).reshape(npts), eps)
 
@@ -226,13 +237,15 @@ def increment_from_outputs(state: HState, de: np.ndarray, out) -> Increment:
     """Wrap the kernel outputs ``out`` of the increment ``de`` (npts, 3) from ``state``."""
     batch = state.batch_shape
     n = state.n_dir
-    (nd1, nd2, nal, nN1, nT1, nN2, nl1, nl2, slid, opn, sig, tan, tanL, dPi, T3, w2, w2n, w2t) = out
+    (nd1, nd2, nal, nN1, nT1, nN2, nl1, nl2, nca, nsa, slid, opn, sig, tan, tanL, dPi, T3, w2, w2n,
+     w2t) = out
     hshape = batch + (n,)
     stress = from_voigt(sig, batch)
     new_state = HState(
         d1=nd1.reshape(hshape), d2=nd2.reshape(hshape), alpha=nal.reshape(hshape),
         N1=nN1.reshape(hshape), T1=nT1.reshape(hshape), N2=nN2.reshape(hshape),
         l1=nl1.reshape(hshape), l2=nl2.reshape(hshape),
+        cos_alpha=nca.reshape(hshape), sin_alpha=nsa.reshape(hshape),
         eps=state.eps + from_voigt(de, batch), stress=stress, V0=np.array(state.V0, dtype=float),
         sliding=slid.reshape(hshape), is_open=opn.reshape(hshape))
     return Increment(

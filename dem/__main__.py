@@ -44,14 +44,23 @@ def cmd_probes(a):
     if a.damping is not None:
         state = state._replace(params=state.params.replace(damping=a.damping))
     os.makedirs(a.out, exist_ok=True)
-    if not a.no_relax:
+    ck = os.path.join(a.out, "probe_runs.jsonl")
+    ref_path = os.path.join(a.out, "stateR.npz")
+    if not a.resume and os.path.exists(ck):
+        os.remove(ck)
+    if a.no_relax:
+        pass
+    elif a.resume and os.path.exists(ref_path):
+        state, meta = io.load_state(ref_path)
+        print(f"[probes] resumed: reference state {ref_path} ({meta})", file=sys.stderr)
+    else:
         state, ok, steps, ub = prepare_reference(state, opts, verbose=True)
         print(f"[probes] reference relaxed at the A stresses: converged={ok} steps={steps} "
               f"unbalanced={ub:.2e}", file=sys.stderr)
-        io.save_state(os.path.join(a.out, "stateR.npz"), state,
-                      meta={"converged": ok, "steps": steps, "unbalanced": ub})
+        io.save_state(ref_path, state, meta={"converged": ok, "steps": steps, "unbalanced": ub})
     alphas = directions(a.step_q3, a.step_other)
-    rows = run_probes(state, alphas, opts, workers=a.workers, scheduler=a.scheduler)
+    rows = run_probes(state, alphas, opts, workers=a.workers, scheduler=a.scheduler,
+                      checkpoint=ck)
     io.write_csv(os.path.join(a.out, "probes.csv"), COLUMNS,
                  [[r[c] if not isinstance(r[c], bool) else int(r[c]) for c in COLUMNS]
                   for r in rows])
@@ -118,6 +127,9 @@ def main(argv=None):
                    help="override the Cundall damping of the state (sensitivity check)")
     p.add_argument("--workers", type=int, default=None, help="local processes")
     p.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the runs already in DIR/probe_runs.jsonl (and DIR/stateR.npz) "
+                        "and run only the missing ones")
     p.set_defaults(func=cmd_probes)
 
     c = sub.add_parser("bench", help="particle-steps/s on a dense confined sample")

@@ -16,6 +16,8 @@ the elastic strain; plastic = |de - de_elastic| > plastic_tol |de_elastic|.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
 import sys
@@ -175,40 +177,115 @@ def _task(args):
     return run_probe(state, alpha, sliding, opts, threads=1)
 
 
+def state_fingerprint(state: State) -> str:
+    """SHA-256 (hex) of what a probe starts from: positions, velocities, spins, walls, the
+    pair list with its history, the step and the parameters. Two states with the same
+    fingerprint give the same probe results (the kernels are deterministic)."""
+    h = hashlib.sha256()
+    for a in (state.x, state.v, state.w, state.theta, state.r, state.walls, state.walls_ref,
+              state.prev, state.x_ref, state.pi, state.pj, state.ft, state.ref_len):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(json.dumps([state.params.to_dict(), state.step, state.mu, state.cap_on,
+                         list(state.control)], default=str).encode())
+    return h.hexdigest()
+
+
+def _checkpoint_header(state, opts):
+    return {"fingerprint": state_fingerprint(state), "options": list(opts)}
+
+
+def read_checkpoint(path, state: State, opts: ProbeOptions) -> dict:
+    """Finished probe runs of a checkpoint file (JSON lines, see ``run_probes``) that belong to
+    this state and these options: {(alpha_sigma, sliding): result}. A line cut short by an
+    interrupted write is dropped; runs of another state or other options are refused with a
+    ValueError rather than mixed in."""
+    if not os.path.exists(path):
+        return {}
+    want = _checkpoint_header(state, opts)
+    done = {}
+    with open(path) as f:
+        lines = f.read().split("\n")
+    for k, line in enumerate(lines):
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            continue  # a torn last line of an interrupted run
+        if k == 0 and "fingerprint" in rec:
+            if rec != want:
+                raise ValueError(f"probe checkpoint {path} belongs to another state or other "
+                                 "probe options; remove it or choose another output directory")
+            continue
+        if isinstance(rec, dict) and "alpha_sigma" in rec:
+            done[(float(rec["alpha_sigma"]), bool(rec["sliding"]))] = rec
+    return done
+
+
 def run_probes(state: State, alphas, opts: ProbeOptions = ProbeOptions(), workers=None,
-               scheduler=None, verbose=True):
+               scheduler=None, verbose=True, checkpoint=None):
     """Run every direction twice (sliding allowed / prevented); returns rows (dicts with
     COLUMNS).  Spread over local processes (ProcessPoolExecutor, `workers`) or over a
     dask.distributed cluster at address `scheduler`.  Each probe runs single-threaded and
-    the kernels do not depend on the thread count, so results do not depend on placement."""
+    the kernels do not depend on the thread count, so results do not depend on placement.
+
+    ``checkpoint``: path of a JSON-lines file; every finished run is appended to it (and
+    flushed to disk) as it comes in, and runs already there for the same state and options
+    are not run again, so an interrupted sweep resumes where it stopped.
+    """
     opts.validate()
     tasks = [(state, a, s, opts) for a in alphas for s in (True, False)]
     t0 = time.time()
     out = []
-    if scheduler:
-        try:
-            from dask.distributed import Client, as_completed
-        except ImportError as e:
-            raise RuntimeError("--scheduler needs dask.distributed (pip install "
-                               "'granular-w2[distributed]')") from e
-        client = Client(scheduler)
-        futs = client.map(_task, tasks, pure=False)
-        for fut in as_completed(futs):
-            out.append(fut.result())
-            _report(out, len(tasks), t0, verbose)
-        client.close()
-    elif workers == 1:
-        for t in tasks:
-            out.append(_task(t))
-            _report(out, len(tasks), t0, verbose)
-    else:
-        # spawn, not fork: numba's OpenMP threading layer must not be forked
-        import multiprocessing
-        with ProcessPoolExecutor(max_workers=workers or os.cpu_count(),
-                                 mp_context=multiprocessing.get_context("spawn")) as ex:
-            for r in ex.map(_task, tasks):
-                out.append(r)
-                _report(out, len(tasks), t0, verbose)
+    sink = None
+    if checkpoint:
+        done = read_checkpoint(checkpoint, state, opts)
+        keep = [done[(float(a) % 360.0, s)] for _, a, s, _ in tasks
+                if (float(a) % 360.0, s) in done]
+        # rewrite the file whole (atomic), so that appends never follow a torn line
+        from .io import atomic_write_bytes
+        lines = [json.dumps(_checkpoint_header(state, opts))] + [json.dumps(r) for r in keep]
+        atomic_write_bytes(checkpoint, ("\n".join(lines) + "\n").encode())
+        out.extend(keep)
+        tasks = [t for t in tasks if (float(t[1]) % 360.0, t[2]) not in done]
+        if keep and verbose:
+            print(f"[probes] {len(keep)} runs taken from {checkpoint}, {len(tasks)} to run",
+                  file=sys.stderr, flush=True)
+        sink = open(checkpoint, "a")
+    total = len(out) + len(tasks)
+
+    def collect(r):
+        out.append(r)
+        if sink is not None:
+            sink.write(json.dumps(r) + "\n")
+            sink.flush()
+            os.fsync(sink.fileno())
+        _report(out, total, t0, verbose)
+
+    try:
+        if not tasks:
+            pass
+        elif scheduler:
+            try:
+                from dask.distributed import Client, as_completed
+            except ImportError as e:
+                raise RuntimeError("--scheduler needs dask.distributed (pip install "
+                                   "'granular-w2[distributed]')") from e
+            with Client(scheduler) as client:
+                futs = client.map(_task, tasks, pure=False)
+                for fut in as_completed(futs):
+                    collect(fut.result())
+        elif workers == 1:
+            for t in tasks:
+                collect(_task(t))
+        else:
+            # spawn, not fork: numba's OpenMP threading layer must not be forked
+            import multiprocessing
+            with ProcessPoolExecutor(max_workers=workers or os.cpu_count(),
+                                     mp_context=multiprocessing.get_context("spawn")) as ex:
+                for r in ex.map(_task, tasks):
+                    collect(r)
+    finally:
+        if sink is not None:
+            sink.close()
     return combine(out, opts)
 
 
@@ -244,31 +321,39 @@ def combine(results, opts: ProbeOptions):
 
 def plot_probes(rows, out_dir):
     """Figs. 15 (W2 polar), 16 (macro vs micro), 17 (normal/tangential parts) as PNG.
-    Polar radius 0.5 + W2 (the circle r = 0.5 is W2 = 0), angle alpha_sigma."""
+    Polar radius 0.5 + W2 (the circle r = 0.5 is W2 = 0), angle alpha_sigma.  Probes that
+    reached no equilibrium (iteration cap) have no meaningful W2 (both ends must be
+    equilibrium states): they are left out of the curves and named under the figure."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    a = np.radians([r["alpha_sigma"] for r in rows] + [rows[0]["alpha_sigma"]])
-    get = lambda k: np.array([r[k] for r in rows] + [rows[0][k]])
+    failed = [r["alpha_sigma"] for r in rows if not r["converged"]]
     figs = (("fig15_w2.png", [("w2", "W2 macro")], "Normalized second-order work W2"),
             ("fig16_w2_micro.png", [("w2", "W2 macro"), ("w2_micro", "sum df.dl / (V|ds||de|)")],
              "Macro vs micro second-order work"),
             ("fig17_w2_nt.png", [("w2n", "W2 normal part"), ("w2t", "W2 tangential part")],
              "Normal and tangential parts of the micro W2"))
     th = np.linspace(0, 2 * np.pi, 200)
+    # closed loop over every direction; NaN where no equilibrium, so the curve breaks there
+    loop = list(rows) + list(rows[:1])
+    a = np.radians([r["alpha_sigma"] for r in loop])
+    get = lambda k: np.array([float(r[k]) if r["converged"] else np.nan for r in loop])
     for name, series, title in figs:
         fig = plt.figure(figsize=(5.5, 5.5))
         ax = fig.add_subplot(projection="polar")
         ax.plot(th, np.full_like(th, 0.5), "--", color="gray", lw=0.8, label="W2 = 0")
         for k, lab in series:
             ax.plot(a, 0.5 + get(k), "o-", ms=3, lw=1, label=lab)
-        pl = np.array([r["plastic"] for r in rows], bool)
+        pl = np.array([bool(r["plastic"]) and r["converged"] for r in rows], bool)
         if name == "fig15_w2.png" and pl.any():
-            ax.plot(np.radians(get("alpha_sigma")[:-1][pl]), 0.5 + get("w2")[:-1][pl], "x",
-                    color="C3", label="plastic")
+            ax.plot(a[:-1][pl], 0.5 + get("w2")[:-1][pl], "x", color="C3", label="plastic")
         ax.set_title(f"{title}\nangle: alpha_sigma (tan = ds1/ds2), radius: 0.5 + W2 [-]",
                      fontsize=9)
         ax.legend(loc="lower left", fontsize=7, bbox_to_anchor=(-0.1, -0.15))
+        if failed:
+            fig.text(0.99, 0.01, f"no equilibrium (not drawn): {len(failed)} probes,\n"
+                     f"alpha_sigma = {', '.join(f'{v:g}' for v in failed)} deg",
+                     ha="right", va="bottom", fontsize=6, wrap=True)
         fig.tight_layout()
         tmp = os.path.join(out_dir, ".tmp-" + name)
         fig.savefig(tmp, dpi=120, format="png")

@@ -86,3 +86,58 @@ def test_cli_biaxial_and_probes(tmp_path):
         assert c in prow[0]
     for name in ("fig15_w2.png", "fig16_w2_micro.png", "fig17_w2_nt.png"):
         assert (out2 / name).exists()
+    # --resume: every run is in the checkpoint, so nothing runs again and the CSV is the same
+    first = (out2 / "probes.csv").read_text()
+    main(["probes", "--state", str(out / "stateA.npz"), "--out", str(out2), "--step-q3", "90",
+          "--step-other", "90", "--workers", "2", "--max-steps", "20000", "--resume"])
+    assert (out2 / "probes.csv").read_text() == first
+
+
+@pytest.fixture(scope="module")
+def reference(small_sample):
+    R, ok, _, _ = prepare_reference(small_sample)
+    assert ok
+    return R
+
+
+def _same_rows(a, b):
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b):
+        assert ra.keys() == rb.keys()
+        for k in ra:
+            va, vb = ra[k], rb[k]
+            assert va == vb or (isinstance(va, float) and math.isnan(va) and math.isnan(vb)), k
+
+
+def test_probe_checkpoint_resumes_without_rerunning(reference, tmp_path, monkeypatch):
+    import dem.probes as probes
+    alphas = [45.0, 225.0]
+    ck = tmp_path / "runs.jsonl"
+    full = probes.run_probes(reference, alphas, workers=1, verbose=False, checkpoint=str(ck))
+    lines = ck.read_text().splitlines()
+    assert len(lines) == 1 + 4          # header + 2 directions x (sliding, no sliding)
+    # an interrupted sweep: two runs on disk, the third cut in the middle of its line
+    ck.write_text("\n".join(lines[:3]) + "\n" + lines[3][: len(lines[3]) // 2])
+    calls = []
+    real = probes._task
+    monkeypatch.setattr(probes, "_task", lambda t: calls.append(t[1:3]) or real(t))
+    resumed = probes.run_probes(reference, alphas, workers=1, verbose=False, checkpoint=str(ck))
+    assert len(calls) == 2              # only the two runs that were not on disk
+    _same_rows(full, resumed)           # bit-for-bit the uninterrupted result
+    assert len(ck.read_text().splitlines()) == 5
+    # a checkpoint of another state is refused, never mixed in
+    other = reference._replace(x=reference.x + 1e-9)
+    with pytest.raises(ValueError, match="another state"):
+        probes.run_probes(other, alphas, workers=1, verbose=False, checkpoint=str(ck))
+
+
+def test_probes_on_a_dask_cluster_equal_local_runs(reference):
+    distributed = pytest.importorskip("distributed")
+    from dem.probes import run_probes
+    alphas = [45.0, 225.0]
+    local = run_probes(reference, alphas, workers=1, verbose=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        remote = run_probes(reference, alphas, scheduler=cluster.scheduler_address,
+                            verbose=False)
+    _same_rows(local, remote)           # where a probe ran does not change its result

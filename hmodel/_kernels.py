@@ -28,6 +28,7 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     lookup()")."""
     ndir = d1.shape[1]
     two_r = 2.0 * r_g
+    rkn = 1.0 / kn             # multiply, not divide, in the hexagon loop
     e11 = de[p, 0]
     e22 = de[p, 1]
     e12 = de[p, 2]
@@ -142,37 +143,42 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
                 nd2 = two_r
                 x30 = 0.0; x31 = 0.0; x32 = 0.0
         else:
-            # 3x3 system: rows 1-2 geometry (Eqs. 18-19 differentiated), row 3 equilibrium
-            a00 = 2.0 * ca; a01 = 1.0; a02 = -2.0 * D1 * sa
-            a10 = 2.0 * sa; a11 = 0.0; a12 = 2.0 * D1 * ca
-            a20 = ca; a21 = -1.0; a22 = (n1 * sa - t1 * ca - kt * D1 * sa) / kn
-            b2 = 0.0
-            for attempt in range(2):
-                # inverse by cofactors
-                c00 = a11 * a22 - a12 * a21
+            # 3x3 system A x = b for x = (dd1, dd2, da): rows 1-2 geometry (Eqs. 18-19
+            # differentiated), row 3 equilibrium,
+            #   A = [[2 ca, 1, -2 d1 sa], [2 sa, 0, 2 d1 ca], [a20, -1, a22]],  b = (dl1, dl2, b2),
+            # inverted by cofactors with the constant entries folded in. The elastic trial has
+            # a20 = ca and b2 = 0: only the first two columns of the inverse are needed (they are
+            # also all the tangent needs, b2 does not depend on de).
+            a00 = 2.0 * ca; a02 = -2.0 * D1 * sa
+            a10 = 2.0 * sa; a12 = 2.0 * D1 * ca
+            a22 = (n1 * sa - t1 * ca - kt * D1 * sa) * rkn
+            c01 = a12 * ca - a10 * a22
+            rdet = 1.0 / (a00 * a12 + c01 - a02 * a10)
+            i00 = a12 * rdet; i01 = (-a02 - a22) * rdet
+            i10 = c01 * rdet; i11 = (a00 * a22 - a02 * ca) * rdet
+            i20 = -a10 * rdet; i21 = (ca + a00) * rdet
+            dd1 = i00 * dl1 + i01 * dl2
+            dd2 = i10 * dl1 + i11 * dl2
+            da = i20 * dl1 + i21 * dl2
+            nN1 = n1 - kn * dd1
+            Ttr = t1 + kt * D1 * da
+            if allow_sliding and abs(Ttr) >= mu * nN1:
+                # Coulomb sliding: replace row 3 (spec: xi multiplies mu N1 only), solve again;
+                # the third column of the inverse equals the first (i02 = i00, i22 = i20)
+                slide = True
+                xi = 1.0 if Ttr >= 0.0 else -1.0
+                a20 = ca + xi * mu * sa
+                a22 = (n1 * sa - t1 * ca) * rkn
+                b2 = sa * (xi * mu * n1 - t1) * rkn
                 c01 = a12 * a20 - a10 * a22
-                c02 = a10 * a21 - a11 * a20
-                rdet = 1.0 / (a00 * c00 + a01 * c01 + a02 * c02)
-                i00 = c00 * rdet; i01 = (a02 * a21 - a01 * a22) * rdet; i02 = (a01 * a12 - a02 * a11) * rdet
+                rdet = 1.0 / (a00 * a12 + c01 - a02 * a10)
+                i00 = a12 * rdet; i01 = (-a02 - a22) * rdet
                 i10 = c01 * rdet; i11 = (a00 * a22 - a02 * a20) * rdet; i12 = (a02 * a10 - a00 * a12) * rdet
-                i20 = c02 * rdet; i21 = (a01 * a20 - a00 * a21) * rdet; i22 = (a00 * a11 - a01 * a10) * rdet
-                dd1 = i00 * dl1 + i01 * dl2 + i02 * b2
+                i20 = -a10 * rdet; i21 = (a20 + a00) * rdet
+                dd1 = i00 * dl1 + i01 * dl2 + i00 * b2
                 dd2 = i10 * dl1 + i11 * dl2 + i12 * b2
-                da = i20 * dl1 + i21 * dl2 + i22 * b2
+                da = i20 * dl1 + i21 * dl2 + i20 * b2
                 nN1 = n1 - kn * dd1
-                if attempt == 1:
-                    break
-                Ttr = t1 + kt * D1 * da
-                if allow_sliding and abs(Ttr) >= mu * nN1:
-                    # Coulomb sliding: replace row 3 (spec: xi multiplies mu N1 only)
-                    slide = True
-                    xi = 1.0 if Ttr >= 0.0 else -1.0
-                    a20 = ca + xi * mu * sa
-                    a21 = -1.0
-                    a22 = (n1 * sa - t1 * ca) / kn
-                    b2 = sa * (xi * mu * n1 - t1) / kn
-                else:
-                    break
             x10 = i00 * g10 + i01 * g20; x11 = i00 * g11 + i01 * g21; x12 = i00 * g12 + i01 * g22
             x20 = i10 * g10 + i11 * g20; x21 = i10 * g11 + i11 * g21; x22 = i10 * g12 + i11 * g22
             x30 = i20 * g10 + i21 * g20; x31 = i20 * g11 + i21 * g21; x32 = i20 * g12 + i21 * g22
@@ -198,10 +204,11 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
         na = a + da
         if abs(da) < 0.01:
             # rotate (cos a, sin a) by the small d_alpha: Taylor series exact to round-off for
-            # |da| < 0.01 (next terms < 3e-24), half the transcendental calls of the kernel
+            # |da| < 0.01 (next terms < 3e-24), in Horner form with constant reciprocals (a
+            # division costs several multiplications and the compiler may not replace it)
             z = da * da
-            sd = da * (1.0 - z / 6.0 * (1.0 - z / 20.0 * (1.0 - z / 42.0)))
-            cd = 1.0 - z / 2.0 * (1.0 - z / 12.0 * (1.0 - z / 30.0 * (1.0 - z / 56.0)))
+            sd = da + da * z * (-1.0 / 6.0 + z * (1.0 / 120.0 - z * (1.0 / 5040.0)))
+            cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (1.0 / 40320.0))))
             cna = ca * cd - sa * sd
             sna = sa * cd + ca * sd
         else:

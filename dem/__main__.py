@@ -83,7 +83,7 @@ def cmd_crosscheck(a):
     t0 = time.time()
     c, timings = run_crosscheck(a.out, full=a.full, n=a.n, seed=a.seed, rate=a.rate,
                                 workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
-                                dem_max_steps=a.max_steps)
+                                dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
@@ -149,6 +149,10 @@ def main(argv=None):
     x.add_argument("--workers", type=int, default=None, help="local processes for the probes")
     x.add_argument("--skip-dem", action="store_true", help="H-model and FE only")
     x.add_argument("--no-domain", action="store_true", help="skip the H-model bifurcation domain")
+    x.add_argument("--threads", type=int, default=None,
+                   help="numba threads of the DEM compaction and biaxial test (default: all)")
+    x.add_argument("--resume", action="store_true",
+                   help="keep the DEM work an interrupted run left in DIR/dem and do the rest")
     x.set_defaults(func=cmd_crosscheck)
 
     a = ap.parse_args(argv)

@@ -58,28 +58,58 @@ def fem_part(out_dir, nx=4, ny=8, n_dir=72, eps1_max=0.03):
     return {"curve": res.curve, "events": res.events, "summary": res.summary, "n_dir": n_dir}
 
 
-def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, threads=1,
-             alphas=None, max_steps=None):
+def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, threads=None,
+             alphas=None, max_steps=None, resume=False):
     """DEM: compaction, drained biaxial test, probes at A (default: the paper's 45 directions,
-    each twice; ``max_steps`` caps each probe run, reported in the rows when hit)."""
+    each twice; ``max_steps`` caps each probe run, reported in the rows when hit).
+
+    ``threads``: Numba threads of the compaction and the biaxial test (default: all; the
+    results do not depend on it); the probes run one thread each in ``workers`` processes.
+    ``resume``: keep what an interrupted run in ``out_dir`` finished (the biaxial test or its
+    checkpoint, the relaxed reference state, the probe runs already on disk).
+    """
     import numba
 
     from . import io
-    from .experiment import run_biaxial
+    from .experiment import COLUMNS, BiaxialResult, run_biaxial
     from .params import DemParams
     from .probes import ProbeOptions, directions, prepare_reference, run_probes
 
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(threads or numba.config.NUMBA_NUM_THREADS,
+                              numba.config.NUMBA_NUM_THREADS))
     bdir = os.path.join(out_dir, "biaxial")
-    res = run_biaxial(DemParams(n=n, seed=seed), bdir, rate=rate, eta_a=eta_a, vtk=False)
-    state, _ = io.load_state(res.state_a_path)
+    summary_path = os.path.join(bdir, "summary.json")
+    a_path = os.path.join(bdir, "stateA.npz")
+    if (resume and os.path.exists(summary_path) and os.path.exists(a_path)
+            and not os.path.exists(os.path.join(bdir, "checkpoint.npz"))):
+        # the biaxial test finished in an earlier run: read it back
+        with open(summary_path) as f:
+            summ = json.load(f)
+        rows = [[r[c] for c in COLUMNS] for r in io.read_csv(os.path.join(bdir, "biaxial.csv"))[1]]
+        res = BiaxialResult(rows, a_path, bool(summ["eta_a_reached"]), summ.get("compaction", {}),
+                            float(summ["wall_time"]))
+        _log(f"DEM: biaxial test taken from {bdir} ({len(rows)} rows)")
+    else:
+        res = run_biaxial(DemParams(n=n, seed=seed), bdir, rate=rate, eta_a=eta_a, vtk=False,
+                          resume=resume)
     opts = ProbeOptions() if max_steps is None else ProbeOptions(max_steps=int(max_steps))
-    stateR, ok, steps, ub = prepare_reference(state, opts)
     pdir = os.path.join(out_dir, "probes")
     os.makedirs(pdir, exist_ok=True)
-    io.save_state(os.path.join(pdir, "stateR.npz"), stateR, meta={"converged": ok})
+    ref_path = os.path.join(pdir, "stateR.npz")
+    checkpoint = os.path.join(pdir, "probe_runs.jsonl")
+    if resume and os.path.exists(ref_path):
+        stateR, meta = io.load_state(ref_path)
+        ok = bool(meta.get("converged"))
+    else:
+        if os.path.exists(checkpoint):
+            os.remove(checkpoint)
+        state, _ = io.load_state(res.state_a_path)
+        _log("DEM: relaxing A under stress control (the reference of the probes)")
+        stateR, ok, steps, ub = prepare_reference(state, opts)
+        io.save_state(ref_path, stateR, meta={"converged": ok})
+    _log(f"DEM: probes ({pdir}, every finished run in {os.path.basename(checkpoint)})")
     probes = run_probes(stateR, directions() if alphas is None else list(alphas), opts,
-                        workers=workers, verbose=False)
+                        workers=workers, verbose=True, checkpoint=checkpoint)
     return {"biaxial_rows": res.rows, "state_a": res.state_a_path, "eta_a_reached": res.eta_a_reached,
             "compaction": res.compaction, "probes": probes, "reference_converged": bool(ok)}
 
@@ -360,11 +390,12 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
 
 def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None, skip_dem=False,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
-                   dem_max_steps=None):
+                   dem_max_steps=None, threads=None, resume=False):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
-    ``dem_alphas`` [deg] replaces the 45 probe directions, ``dem_max_steps`` the probe cap.
+    ``dem_alphas`` [deg] replaces the 45 probe directions, ``dem_max_steps`` the probe cap;
+    ``threads`` and ``resume``: see ``dem_part`` (the H-model and FE parts always rerun).
     """
     from hmodel.io import atomic_open
 
@@ -389,7 +420,8 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
         t = time.time()
         _log(f"DEM: {n} disks, rate {rate}/s, 45 probes x 2")
         dem = dem_part(os.path.join(out_dir, "dem"), n=n, seed=seed, rate=rate, workers=workers,
-                       alphas=dem_alphas, max_steps=dem_max_steps)
+                       alphas=dem_alphas, max_steps=dem_max_steps, threads=threads,
+                       resume=resume)
         n_runs = 2 * len(dem["probes"])
         timings[f"DEM ({n} disks: compaction, biaxial, {n_runs} probe runs)"] = time.time() - t
     c = conclusions(h, dem["probes"] if dem else None, fem)

@@ -17,6 +17,128 @@ import numpy as np
 from numba import njit, prange
 
 
+@njit(cache=True, inline="always")
+def _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
+                    cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding):
+    """Hexagon i of point p updated as in the common case (closed at both ends of the step,
+    elastic, no extra contact 1-4 or 2-6, |d_alpha| < 0.01): the operations of the general loop
+    of ``_update_point`` for that case, in the same order (same bits), without a branch.
+
+    Returns the new (d1, d2, alpha, N1, T1, N2, l1, l2, cos alpha, sin alpha), ``other`` = 1.0
+    where the hexagon is not in the common case (0.0 otherwise), the three stress terms and the
+    nine tangent terms (row-major) that the point sums (Love-Weber, Eq. 23)."""
+    c = cos_t[i]
+    s = sin_t[i]
+    cc = c * c
+    ss = s * s
+    cs = c * s
+    w = omega[i]
+    en = cc * e11 + ss * e22 + 2.0 * cs * e12
+    et = ss * e11 + cc * e22 - 2.0 * cs * e12
+    L1 = l1[p, i]
+    L2 = l2[p, i]
+    dl1 = -L1 * en
+    dl2 = -L2 * et
+    g10 = -L1 * cc; g11 = -L1 * ss; g12 = -2.0 * L1 * cs
+    g20 = -L2 * ss; g21 = -L2 * cc; g22 = 2.0 * L2 * cs
+    D1 = d1[p, i]
+    n1 = N1[p, i]
+    t1 = T1[p, i]
+    ca = cos_a[p, i]
+    sa = sin_a[p, i]
+    a00 = 2.0 * ca; a02 = -2.0 * D1 * sa
+    a10 = 2.0 * sa; a12 = 2.0 * D1 * ca
+    a22 = (n1 * sa - t1 * ca - kt * D1 * sa) * rkn
+    c01 = a12 * ca - a10 * a22
+    rdet = 1.0 / (a00 * a12 + c01 - a02 * a10)
+    i00 = a12 * rdet; i01 = (-a02 - a22) * rdet
+    i10 = c01 * rdet; i11 = (a00 * a22 - a02 * ca) * rdet
+    i20 = -a10 * rdet; i21 = (ca + a00) * rdet
+    dd1 = i00 * dl1 + i01 * dl2
+    dd2 = i10 * dl1 + i11 * dl2
+    da = i20 * dl1 + i21 * dl2
+    nN1 = n1 - kn * dd1
+    Ttr = t1 + kt * D1 * da
+    x10 = i00 * g10 + i01 * g20; x11 = i00 * g11 + i01 * g21; x12 = i00 * g12 + i01 * g22
+    x20 = i10 * g10 + i11 * g20; x21 = i10 * g11 + i11 * g21; x22 = i10 * g12 + i11 * g22
+    x30 = i20 * g10 + i21 * g20; x31 = i20 * g11 + i21 * g21; x32 = i20 * g12 + i21 * g22
+    nN2 = N2[p, i] - kn * dd2
+    dN1_0 = -kn * x10; dN1_1 = -kn * x11; dN1_2 = -kn * x12
+    dN2_0 = -kn * x20; dN2_1 = -kn * x21; dN2_2 = -kn * x22
+    dT1_0 = kt * D1 * x30; dT1_1 = kt * D1 * x31; dT1_2 = kt * D1 * x32
+    z = da * da
+    sd = da + da * z * (-1.0 / 6.0 + z * (1.0 / 120.0 - z * (1.0 / 5040.0)))
+    cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (1.0 / 40320.0))))
+    cna = ca * cd - sa * sd
+    sna = sa * cd + ca * sd
+    nl1 = L1 + dl1
+    nl2 = L2 + dl2
+    # the additions of the (zero) extra-contact terms stay: x + 0.0 is not x for x = -0.0
+    zero = 0.0
+    F2 = nN1 * sna - Ttr * cna
+    dF2_0 = dN1_0 * sna + nN1 * cna * x30 - dT1_0 * cna + Ttr * sna * x30
+    dF2_1 = dN1_1 * sna + nN1 * cna * x31 - dT1_1 * cna + Ttr * sna * x31
+    dF2_2 = dN1_2 * sna + nN1 * cna * x32 - dT1_2 * cna + Ttr * sna * x32
+    PP1 = 2.0 * nN2 + zero
+    PP2 = 2.0 * F2 + 2.0 * zero
+    wS1 = w * (PP1 * nl1)
+    wS2 = w * (PP2 * nl2)
+    dS1_0 = (2.0 * dN2_0 + zero) * nl1 + PP1 * g10
+    dS1_1 = (2.0 * dN2_1 + zero) * nl1 + PP1 * g11
+    dS1_2 = (2.0 * dN2_2 + zero) * nl1 + PP1 * g12
+    dS2_0 = (2.0 * dF2_0 + 2.0 * zero) * nl2 + PP2 * g20
+    dS2_1 = (2.0 * dF2_1 + 2.0 * zero) * nl2 + PP2 * g21
+    dS2_2 = (2.0 * dF2_2 + 2.0 * zero) * nl2 + PP2 * g22
+    # not the common case: open at the start, Coulomb trial violated (only tested when
+    # sliding is allowed), opening, large rotation, an extra contact (NaN: general too)
+    other = (was_open[p, i] | (allow_sliding & (abs(Ttr) >= mu * nN1))
+             | (nN1 < 0.0) | (nN2 < 0.0) | (not (abs(da) < 0.01))
+             | (L1 < two_r) | (L2 < two_r) | (nl1 < two_r) | (nl2 < two_r))
+    return (D1 + dd1, d2[p, i] + dd2, alpha[p, i] + da, nN1, Ttr, nN2, nl1, nl2, cna, sna,
+            1.0 if other else 0.0,
+            wS1 * cc + wS2 * ss, wS1 * ss + wS2 * cc, (wS1 - wS2) * cs,
+            w * (dS1_0 * cc + dS2_0 * ss), w * (dS1_1 * cc + dS2_1 * ss), w * (dS1_2 * cc + dS2_2 * ss),
+            w * (dS1_0 * ss + dS2_0 * cc), w * (dS1_1 * ss + dS2_1 * cc), w * (dS1_2 * ss + dS2_2 * cc),
+            w * (dS1_0 - dS2_0) * cs, w * (dS1_1 - dS2_1) * cs, w * (dS1_2 - dS2_2) * cs)
+
+
+@njit(cache=True, error_model="numpy")
+def _common_case(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
+                 cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                 o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, fast):
+    """``_common_hexagon`` for every orientation of point ``p``: stores the ten new hexagon fields
+    in the ``o_*`` arrays and, in ``fast`` (13, n_dir), the flag (row 0), stress terms (rows 1-3)
+    and tangent terms (rows 4-12, row-major).
+
+    Written for the compiler's loop vectorizer (SIMD over orientations): no branch, and each loop
+    stores at most six arrays (beyond that its run-time overlap checks rule vectorization out;
+    the common update is cheap, so each loop repeats it and the compiler keeps what that loop
+    stores). error_model="numpy": 1/0 gives inf instead of a branch to a ZeroDivisionError, which
+    would also rule vectorization out; such a hexagon gets a non-finite d_alpha, hence the flag,
+    and the general loop redoes it (with Python's error model)."""
+    ndir = d1.shape[1]
+    for i in range(ndir):
+        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
+        o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]
+        o_N1[p, i] = h[3]; o_T1[p, i] = h[4]; o_N2[p, i] = h[5]
+    for i in range(ndir):
+        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
+        o_l1[p, i] = h[6]; o_l2[p, i] = h[7]; o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
+        fast[0, i] = h[10]; fast[1, i] = h[11]
+    for i in range(ndir):
+        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
+        fast[2, i] = h[12]; fast[3, i] = h[13]; fast[4, i] = h[14]
+        fast[5, i] = h[15]; fast[6, i] = h[16]; fast[7, i] = h[17]
+    for i in range(ndir):
+        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
+        fast[8, i] = h[18]; fast[9, i] = h[19]; fast[10, i] = h[20]
+        fast[11, i] = h[21]; fast[12, i] = h[22]
+
+
 @njit(cache=True)
 def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                  cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
@@ -39,7 +161,38 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     P0 = 0.0; P1 = 0.0; P2 = 0.0
     q0 = 0.0; q1 = 0.0; q2 = 0.0
     w2 = 0.0; w2n = 0.0; w2t = 0.0
+    # The common case first (closed at both ends of the step, elastic, no extra contact, small
+    # rotation: every hexagon of the isotropic state), vectorized: ``_common_case`` stores the new
+    # hexagon fields and, in ``fast``, a flag (row 0) for the hexagons that are not in it, the
+    # stress (rows 1-3) and tangent (rows 4-12) terms of the others. The loop below redoes the
+    # flagged hexagons the general way and sums the terms in the orientation order, as it would
+    # without the common case (the same operations, so the same bits).
+    # Worth it when at least half the hexagons start closed (else most of its work is discarded;
+    # either way the results are the same bits).
+    n_closed = 0
+    if not extras:
+        for i in range(ndir):
+            if not was_open[p, i]:
+                n_closed += 1
+    common = 2 * n_closed >= ndir and not extras
+    fast = np.empty((13, ndir))
+    if common:
+        _common_case(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
+                     cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                     o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, fast)
     for i in range(ndir):
+        if common and fast[0, i] == 0.0:
+            # common case: the new fields are stored already
+            o_sliding[p, i] = False
+            o_open[p, i] = False
+            s0 += fast[1, i]
+            s1 += fast[2, i]
+            s2 += fast[3, i]
+            t00 += fast[4, i]; t01 += fast[5, i]; t02 += fast[6, i]
+            t10 += fast[7, i]; t11 += fast[8, i]; t12 += fast[9, i]
+            t20 += fast[10, i]; t21 += fast[11, i]; t22 += fast[12, i]
+            continue
+        # general case: any pattern
         c = cos_t[i]
         s = sin_t[i]
         cc = c * c

@@ -105,13 +105,14 @@ def _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_o
 @njit(cache=True, error_model="numpy")
 def _common_case(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
                  cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                 o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, fast):
+                 o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
+                 fast):
     """``_common_hexagon`` for every orientation of point ``p``: stores the ten new hexagon fields
-    in the ``o_*`` arrays and, in ``fast`` (13, n_dir), the flag (row 0), stress terms (rows 1-3)
-    and tangent terms (rows 4-12, row-major).
+    in the ``o_*`` arrays (and sliding = open = False) and, in ``fast`` (13, n_dir), the flag
+    (row 0), stress terms (rows 1-3) and tangent terms (rows 4-12, row-major).
 
     Written for the compiler's loop vectorizer (SIMD over orientations): no branch, and each loop
-    stores at most six arrays (beyond that its run-time overlap checks rule vectorization out;
+    stores at most eight arrays (beyond that its run-time overlap checks rule vectorization out;
     the common update is cheap, so each loop repeats it and the compiler keeps what that loop
     stores). error_model="numpy": 1/0 gives inf instead of a branch to a ZeroDivisionError, which
     would also rule vectorization out; such a hexagon gets a non-finite d_alpha, hence the flag,
@@ -120,23 +121,22 @@ def _common_case(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e
     for i in range(ndir):
         h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
                             e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
-        o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]
-        o_N1[p, i] = h[3]; o_T1[p, i] = h[4]; o_N2[p, i] = h[5]
+        o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
+        o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
     for i in range(ndir):
         h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
                             e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
-        o_l1[p, i] = h[6]; o_l2[p, i] = h[7]; o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
-        fast[0, i] = h[10]; fast[1, i] = h[11]
+        o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
+        fast[0, i] = h[10]; fast[1, i] = h[11]; fast[2, i] = h[12]; fast[3, i] = h[13]
+        fast[4, i] = h[14]; fast[5, i] = h[15]
     for i in range(ndir):
         h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
                             e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
-        fast[2, i] = h[12]; fast[3, i] = h[13]; fast[4, i] = h[14]
-        fast[5, i] = h[15]; fast[6, i] = h[16]; fast[7, i] = h[17]
+        fast[6, i] = h[16]; fast[7, i] = h[17]; fast[8, i] = h[18]; fast[9, i] = h[19]
+        fast[10, i] = h[20]; fast[11, i] = h[21]; fast[12, i] = h[22]
     for i in range(ndir):
-        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
-        fast[8, i] = h[18]; fast[9, i] = h[19]; fast[10, i] = h[20]
-        fast[11, i] = h[21]; fast[12, i] = h[22]
+        o_sliding[p, i] = False
+        o_open[p, i] = False
 
 
 @njit(cache=True)
@@ -179,12 +179,11 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     if common:
         _common_case(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
                      cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                     o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, fast)
+                     o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
+                     o_sliding, o_open, fast)
     for i in range(ndir):
         if common and fast[0, i] == 0.0:
             # common case: the new fields are stored already
-            o_sliding[p, i] = False
-            o_open[p, i] = False
             s0 += fast[1, i]
             s1 += fast[2, i]
             s2 += fast[3, i]

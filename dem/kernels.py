@@ -6,12 +6,12 @@ Kernels take only arrays and scalars.  Conventions (2D, thickness t):
   Pair list: pi, pj (P,) int32 with pi < pj, sorted by (pi, pj); ft (P,) tangential
   force history [N] expressed in the contact frame (t = z x n), which in 2D *is*
   the history rotated with the contact.
-  Force convention: fpx/fpy (P,) force exerted on pi by pj.  n = (x_j - x_i)/|.|.
+  Force convention: force exerted on pi by pj.  n = (x_j - x_i)/|.|.
   Walls: walls (4,) = [x_left, x_right, y_bottom, y_top] [m]; frictionless.
 
-Determinism: forces are computed per contact in parallel (no reduction) and
-gathered per particle in a fixed order (the incidence list), so results do not
-depend on the number of threads.
+Determinism: the disks are split into contiguous blocks, one per thread; every disk sums
+its contact forces in increasing pair index whatever the split (``_block_step``), so
+results do not depend on the number of threads, to the bit.
 """
 import math
 
@@ -138,28 +138,6 @@ def carry_history(old_pi, old_pj, old_ft, new_pi, new_pj, n):
 
 
 @njit(cache=True)
-def incidence(pi, pj, n):
-    """Per-particle list of incident pairs: entry e = 2k + side (side 1: particle is pj[k]).
-
-    Entries are in increasing k for each particle so the force gather has a fixed order.
-    """
-    off = np.zeros(n + 1, np.int64)
-    for k in range(pi.shape[0]):
-        off[pi[k] + 1] += 1
-        off[pj[k] + 1] += 1
-    for i in range(n):
-        off[i + 1] += off[i]
-    fill = off[:-1].copy()
-    ent = np.empty(2 * pi.shape[0], np.int64)
-    for k in range(pi.shape[0]):
-        ent[fill[pi[k]]] = 2 * k
-        fill[pi[k]] += 1
-        ent[fill[pj[k]]] = 2 * k + 1
-        fill[pj[k]] += 1
-    return off, ent
-
-
-@njit(cache=True)
 def wall_candidates(x, r, walls, skin):
     """Particles closer than r + skin to each wall.  Returns (off (5,), idx)."""
     n = x.shape[0]
@@ -191,52 +169,49 @@ def wall_candidates(x, r, walls, skin):
 # --------------------------------------------------------------------------------------
 # Contact law
 # --------------------------------------------------------------------------------------
-@njit(cache=True, parallel=True)
-def pair_forces(x, v, w, r, m, pi, pj, ft, fpx, fpy, kn, kt, mu, cap_on, beta, dt):
-    """Linear spring contact law with incremental tangential spring and Coulomb cap.
+@njit(cache=True, inline="always")
+def _contact(k, x, v, w, r, m, pi, pj, ft, kn, kt, mu, cap_on, beta, dt):
+    """Linear spring contact law of pair k with incremental tangential spring and Coulomb cap.
 
     fn = kn * overlap (+ optional normal dashpot, beta = fraction of critical damping),
     no tension (fn >= 0); ft += kt * (relative tangential velocity) * dt, |ft| <= mu fn
     when cap_on (cap_on = 0 means sliding prevented: the 'elastic' probes).
-    Writes the force on pi by pj into fpx, fpy and the new history into ft.
+    Stores the new history in ft[k] (0 when the disks do not touch: cohesionless, the
+    history is lost).  Returns (touching, fx, fy, f_t): the force [N] on pi[k] by pj[k]
+    and its tangential component (whose moment about either centre is f_t r).
     """
-    for k in prange(pi.shape[0]):
-        i = pi[k]
-        j = pj[k]
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        d2 = dx * dx + dy * dy
-        rs = r[i] + r[j]
-        if d2 >= rs * rs:
-            # contact open: history is lost (cohesionless)
-            ft[k] = 0.0
-            fpx[k] = 0.0
-            fpy[k] = 0.0
-            continue
-        d = math.sqrt(d2)
-        nx = dx / d
-        ny = dy / d
-        tx = -ny
-        ty = nx
-        dvx = v[j, 0] - v[i, 0]
-        dvy = v[j, 1] - v[i, 1]
-        fn = kn * (rs - d)
-        if beta > 0.0:
-            meff = m[i] * m[j] / (m[i] + m[j])
-            fn -= 2.0 * beta * math.sqrt(kn * meff) * (dvx * nx + dvy * ny)
-            if fn < 0.0:
-                fn = 0.0
-        vt = dvx * tx + dvy * ty - (w[i] * r[i] + w[j] * r[j])
-        f_t = ft[k] + kt * vt * dt
-        if cap_on:
-            lim = mu * fn
-            if f_t > lim:
-                f_t = lim
-            elif f_t < -lim:
-                f_t = -lim
-        ft[k] = f_t
-        fpx[k] = -fn * nx + f_t * tx
-        fpy[k] = -fn * ny + f_t * ty
+    i = pi[k]
+    j = pj[k]
+    dx = x[j, 0] - x[i, 0]
+    dy = x[j, 1] - x[i, 1]
+    d2 = dx * dx + dy * dy
+    rs = r[i] + r[j]
+    if d2 >= rs * rs:
+        ft[k] = 0.0
+        return False, 0.0, 0.0, 0.0
+    d = math.sqrt(d2)
+    nx = dx / d
+    ny = dy / d
+    tx = -ny
+    ty = nx
+    dvx = v[j, 0] - v[i, 0]
+    dvy = v[j, 1] - v[i, 1]
+    fn = kn * (rs - d)
+    if beta > 0.0:
+        meff = m[i] * m[j] / (m[i] + m[j])
+        fn -= 2.0 * beta * math.sqrt(kn * meff) * (dvx * nx + dvy * ny)
+        if fn < 0.0:
+            fn = 0.0
+    vt = dvx * tx + dvy * ty - (w[i] * r[i] + w[j] * r[j])
+    f_t = ft[k] + kt * vt * dt
+    if cap_on:
+        lim = mu * fn
+        if f_t > lim:
+            f_t = lim
+        elif f_t < -lim:
+            f_t = -lim
+    ft[k] = f_t
+    return True, -fn * nx + f_t * tx, -fn * ny + f_t * ty, f_t
 
 
 @njit(cache=True)
@@ -268,46 +243,6 @@ def wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK):
                 fext[p, axis] += sgn * f
                 wF[wi] += f
                 wK[wi] += kn
-
-
-@njit(cache=True, parallel=True)
-def integrate(x, v, w, theta, r, m, inertia, inc_off, inc_ent, fpx, fpy, ft, fext, fnet,
-              x_ref, disp2, damping, dt):
-    """Gather contact forces per particle (fixed order), Cundall damping, leapfrog update.
-
-    Cundall non-viscous damping per component: F <- F - lambda |F| sign(v).
-    fnet (N,3) receives the undamped resultant (fx, fy, torque); disp2 (N,) the squared
-    displacement since the last neighbour-list rebuild.
-    """
-    for p in prange(x.shape[0]):
-        fx = fext[p, 0]
-        fy = fext[p, 1]
-        tq = 0.0
-        for a in range(inc_off[p], inc_off[p + 1]):
-            e = inc_ent[a]
-            k = e >> 1
-            # branchless: the side bit is random, a branch would mispredict half the time
-            sg = 1.0 - 2.0 * (e & 1)
-            fx += sg * fpx[k]
-            fy += sg * fpy[k]
-            tq += ft[k]
-        tq *= r[p]
-        fnet[p, 0] = fx
-        fnet[p, 1] = fy
-        fnet[p, 2] = tq
-        if damping > 0.0:
-            fx -= damping * abs(fx) * np.sign(v[p, 0])
-            fy -= damping * abs(fy) * np.sign(v[p, 1])
-            tq -= damping * abs(tq) * np.sign(w[p])
-        v[p, 0] += fx / m[p] * dt
-        v[p, 1] += fy / m[p] * dt
-        w[p] += tq / inertia[p] * dt
-        x[p, 0] += v[p, 0] * dt
-        x[p, 1] += v[p, 1] * dt
-        theta[p] += w[p] * dt
-        ddx = x[p, 0] - x_ref[p, 0]
-        ddy = x[p, 1] - x_ref[p, 1]
-        disp2[p] = ddx * ddx + ddy * ddy
 
 
 # --------------------------------------------------------------------------------------
@@ -351,73 +286,140 @@ def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thi
 
 
 # --------------------------------------------------------------------------------------
-# One thread: contact law, gather and integration fused in two passes
+# Contact forces, their sum per disk and the integration, in blocks of disks
 # --------------------------------------------------------------------------------------
 @njit(cache=True)
-def forces_and_integrate_serial(x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet,
-                                x_ref, disp2, kn, kt, mu, cap_on, beta, damping, dt):
-    """One time step of ``pair_forces`` + ``integrate`` on one thread, bit-identical to them.
+def block_partition(pi, n, nblocks):
+    """Split the disks into ``nblocks`` contiguous index ranges of about equal work (one unit
+    per disk and per pair it heads).  Returns bounds (nblocks+1,) of disk indices and
+    kbounds (nblocks+1,) of pair indices: block b owns disks [bounds[b], bounds[b+1]) and
+    the pairs [kbounds[b], kbounds[b+1]) whose first disk it owns (pairs sorted by pi)."""
+    off = row_offsets(pi, n)
+    total = n + pi.shape[0]
+    bounds = np.empty(nblocks + 1, np.int64)
+    bounds[0] = 0
+    p = 0
+    for b in range(1, nblocks):
+        target = (total * b) // nblocks
+        while p < n and p + off[p] < target:
+            p += 1
+        bounds[b] = p
+    bounds[nblocks] = n
+    kbounds = np.empty(nblocks + 1, np.int64)
+    for b in range(nblocks + 1):
+        kbounds[b] = off[bounds[b]]
+    return bounds, kbounds
 
-    The pair loop scatters each contact force straight into fnet (N,3) instead of storing it
-    per pair and gathering it through the incidence list: for every particle the additions
-    come in increasing pair index, the order of the incidence list, and a - b equals
-    a + (-1.0) b exactly, so the sums are the same to the bit.  It saves the per-pair force
-    arrays and the random reads of the gather.  ``wall_forces`` must have filled fext.
-    Returns the largest squared displacement since the last rebuild [m^2].
+
+@njit(cache=True)
+def cross_pairs(pj, bounds, kbounds):
+    """Pairs whose second disk lies in a later block than their first.  Returns cross_k
+    (C,) their pair indices in increasing order, ci_off (nblocks+1,) the range of cross_k
+    headed by each block, and cj_off (nblocks+1,), cj_idx (C,) the cross entries grouped by
+    the block of their second disk, in increasing pair index inside each group."""
+    nb = bounds.shape[0] - 1
+    ci_off = np.zeros(nb + 1, np.int64)
+    cj_cnt = np.zeros(nb + 1, np.int64)
+    for b in range(nb):
+        for k in range(kbounds[b], kbounds[b + 1]):
+            if pj[k] >= bounds[b + 1]:
+                ci_off[b + 1] += 1
+                bj = b + 1
+                while pj[k] >= bounds[bj + 1]:
+                    bj += 1
+                cj_cnt[bj + 1] += 1
+    for b in range(nb):
+        ci_off[b + 1] += ci_off[b]
+        cj_cnt[b + 1] += cj_cnt[b]
+    ncross = ci_off[nb]
+    cross_k = np.empty(ncross, np.int64)
+    cj_idx = np.empty(ncross, np.int64)
+    fill = cj_cnt[:-1].copy()
+    c = 0
+    for b in range(nb):
+        for k in range(kbounds[b], kbounds[b + 1]):
+            if pj[k] >= bounds[b + 1]:
+                cross_k[c] = k
+                bj = b + 1
+                while pj[k] >= bounds[bj + 1]:
+                    bj += 1
+                cj_idx[fill[bj]] = c
+                fill[bj] += 1
+                c += 1
+    return cross_k, ci_off, cj_cnt, cj_idx
+
+
+@njit(cache=True, parallel=True)
+def cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, kn, kt, mu, cap_on, beta, dt, cf, con):
+    """Contact law of the cross pairs (between blocks), before the blocks run: cf (C,3)
+    receives (fx, fy, f_t), con (C,) whether the disks touch."""
+    for c in prange(cross_k.shape[0]):
+        touch, fx, fy, f_t = _contact(cross_k[c], x, v, w, r, m, pi, pj, ft, kn, kt, mu,
+                                      cap_on, beta, dt)
+        con[c] = touch
+        cf[c, 0] = fx
+        cf[c, 1] = fy
+        cf[c, 2] = f_t
+
+
+@njit(cache=True)
+def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
+                x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref, disp2,
+                kn, kt, mu, cap_on, beta, damping, dt):
+    """One time step of the disks of block b: contact forces summed into fnet (N,3) =
+    (fx, fy, torque), Cundall damping, leapfrog.  Returns the largest squared displacement
+    since the last rebuild in the block [m^2].
+
+    Each contact force is added straight into the net force of its two disks, in increasing
+    pair index for every disk, starting from the wall force fext; a - b equals a + (-1) b
+    exactly, so the sums do not depend on how the disks are split into blocks: results are
+    the same to the bit for any number of blocks (threads).  The contributions of the cross
+    pairs of earlier blocks come first (their pair indices are lower than any pair this block
+    heads); those of the cross pairs this block heads come in their place.  A block writes
+    only its own disks and reads others' positions only through cross pairs, computed
+    before, so blocks run concurrently.
     """
-    n = x.shape[0]
-    for p in range(n):
+    p0 = bounds[b]
+    p1 = bounds[b + 1]
+    for p in range(p0, p1):
         fnet[p, 0] = fext[p, 0]
         fnet[p, 1] = fext[p, 1]
         fnet[p, 2] = 0.0
-    for k in range(pi.shape[0]):
+    for e in range(cj_off[b], cj_off[b + 1]):
+        c = cj_idx[e]
+        if con[c]:
+            j = pj[cross_k[c]]
+            fnet[j, 0] -= cf[c, 0]
+            fnet[j, 1] -= cf[c, 1]
+            fnet[j, 2] += cf[c, 2]
+    c = ci_off[b]
+    for k in range(kbounds[b], kbounds[b + 1]):
         i = pi[k]
         j = pj[k]
-        dx = x[j, 0] - x[i, 0]
-        dy = x[j, 1] - x[i, 1]
-        d2 = dx * dx + dy * dy
-        rs = r[i] + r[j]
-        if d2 >= rs * rs:
-            # contact open: history is lost (cohesionless); a zero force adds nothing
-            ft[k] = 0.0
+        if j >= p1:
+            # cross pair: force computed before; this block adds the share of its disk i
+            if con[c]:
+                fnet[i, 0] += cf[c, 0]
+                fnet[i, 1] += cf[c, 1]
+                fnet[i, 2] += cf[c, 2]
+            c += 1
             continue
-        d = math.sqrt(d2)
-        nx = dx / d
-        ny = dy / d
-        tx = -ny
-        ty = nx
-        dvx = v[j, 0] - v[i, 0]
-        dvy = v[j, 1] - v[i, 1]
-        fn = kn * (rs - d)
-        if beta > 0.0:
-            meff = m[i] * m[j] / (m[i] + m[j])
-            fn -= 2.0 * beta * math.sqrt(kn * meff) * (dvx * nx + dvy * ny)
-            if fn < 0.0:
-                fn = 0.0
-        vt = dvx * tx + dvy * ty - (w[i] * r[i] + w[j] * r[j])
-        f_t = ft[k] + kt * vt * dt
-        if cap_on:
-            lim = mu * fn
-            if f_t > lim:
-                f_t = lim
-            elif f_t < -lim:
-                f_t = -lim
-        ft[k] = f_t
-        fx = -fn * nx + f_t * tx
-        fy = -fn * ny + f_t * ty
-        fnet[i, 0] += fx
-        fnet[i, 1] += fy
-        fnet[i, 2] += f_t
-        fnet[j, 0] -= fx
-        fnet[j, 1] -= fy
-        fnet[j, 2] += f_t
+        touch, fx, fy, f_t = _contact(k, x, v, w, r, m, pi, pj, ft, kn, kt, mu, cap_on, beta, dt)
+        if touch:
+            fnet[i, 0] += fx
+            fnet[i, 1] += fy
+            fnet[i, 2] += f_t
+            fnet[j, 0] -= fx
+            fnet[j, 1] -= fy
+            fnet[j, 2] += f_t
     dmax = 0.0
-    for p in range(n):
+    for p in range(p0, p1):
         fx = fnet[p, 0]
         fy = fnet[p, 1]
         tq = fnet[p, 2] * r[p]
         fnet[p, 2] = tq
         if damping > 0.0:
+            # Cundall non-viscous damping per component: F <- F - lambda |F| sign(v)
             fx -= damping * abs(fx) * np.sign(v[p, 0])
             fy -= damping * abs(fy) * np.sign(v[p, 1])
             tq -= damping * abs(tq) * np.sign(w[p])
@@ -436,58 +438,65 @@ def forces_and_integrate_serial(x, v, w, theta, r, m, inertia, pi, pj, ft, fext,
     return dmax
 
 
+@njit(cache=True, parallel=True)
+def blocks_step(bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
+                x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref, disp2,
+                kn, kt, mu, cap_on, beta, damping, dt, dmax):
+    """``_block_step`` of every block, blocks spread over threads; dmax (nblocks,)."""
+    for b in prange(bounds.shape[0] - 1):
+        dmax[b] = _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
+                              x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref,
+                              disp2, kn, kt, mu, cap_on, beta, damping, dt)
+
+
 # --------------------------------------------------------------------------------------
 # Driver: many steps in one call
 # --------------------------------------------------------------------------------------
 @njit(cache=True)
-def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, fpx, fpy, inc_off, inc_ent,
-            cand_off, cand, fext, fnet, x_ref, walls_ref, disp2, walls, prev, wF, wK,
+def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, cand_off, cand, fext, fnet,
+            x_ref, walls_ref, disp2, walls, prev, wF, wK,
             mode, s_from, s_to, ramp_start, ramp_len, rate, len0, step0,
             kn, kt, mu, cap_on, beta, damping, dt, thickness, gain, smoothing, vmax, half_skin,
-            serial):
+            nblocks):
     """Run up to nsteps time steps; stop early when the neighbour list must be rebuilt.
 
     Returns the number of steps done.  step0 is the global step counter at entry (the
     stress ramp of the servo is a function of it, so a chunked run equals a single run).
-    ``serial``: use the fused one-thread kernel (same results to the bit as the parallel
-    kernels, which it would otherwise run on one thread with their scheduling overhead).
+    ``nblocks``: blocks of disks run concurrently (one per thread; results do not depend on
+    it, see ``_block_step``).  One block is the plain serial loop.
     """
     hs2 = half_skin * half_skin
     n = x.shape[0]
+    bounds, kbounds = block_partition(pi, n, nblocks)
+    cross_k, ci_off, cj_off, cj_idx = cross_pairs(pj, bounds, kbounds)
+    cf = np.empty((cross_k.shape[0], 3))
+    con = np.empty(cross_k.shape[0], np.bool_)
+    dmax = np.zeros(nblocks)
     done = 0
-    dmax = 0.0
     for s in range(nsteps):
-        if serial:
-            wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
-            dmax = forces_and_integrate_serial(x, v, w, theta, r, m, inertia, pi, pj, ft, fext,
-                                               fnet, x_ref, disp2, kn, kt, mu, cap_on, beta,
-                                               damping, dt)
+        wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
+        if nblocks == 1:
+            dmax[0] = _block_step(0, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
+                                  x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref,
+                                  disp2, kn, kt, mu, cap_on, beta, damping, dt)
         else:
-            pair_forces(x, v, w, r, m, pi, pj, ft, fpx, fpy, kn, kt, mu, cap_on, beta, dt)
-            wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
+            cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, kn, kt, mu, cap_on, beta, dt, cf, con)
+            blocks_step(bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
+                        x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref, disp2,
+                        kn, kt, mu, cap_on, beta, damping, dt, dmax)
         gstep = step0 + s
         if ramp_len > 0:
             rt = (gstep - ramp_start + 1) / ramp_len
             rt = min(max(rt, 0.0), 1.0)
         else:
             rt = 1.0
-        if not serial:
-            integrate(x, v, w, theta, r, m, inertia, inc_off, inc_ent, fpx, fpy, ft, fext, fnet,
-                      x_ref, disp2, damping, dt)
         servo_walls(walls, wF, wK, mode, s_from, s_to, rt, rate, len0, prev, thickness,
                     gain, smoothing, vmax, dt)
         done += 1
-        rebuild = False
+        rebuild = np.max(dmax) > hs2
         for wi in range(4):
             if abs(walls[wi] - walls_ref[wi]) > half_skin:
                 rebuild = True
-        if serial:
-            rebuild = rebuild or dmax > hs2
-        elif not rebuild:
-            for p in range(n):
-                if disp2[p] > hs2:
-                    rebuild = True
-                    break
         if rebuild:
             break
     return done

@@ -14,12 +14,10 @@ from . import kernels
 
 class PairList(NamedTuple):
     """pi, pj (P,) int32 with pi < pj sorted; ft (P,) tangential history [N];
-    inc_off (N+1,), inc_ent (2P,) incidence list; cand_off (5,), cand wall candidates."""
+    cand_off (5,), cand wall candidates."""
     pi: np.ndarray
     pj: np.ndarray
     ft: np.ndarray
-    inc_off: np.ndarray
-    inc_ent: np.ndarray
     cand_off: np.ndarray
     cand: np.ndarray
 
@@ -50,11 +48,9 @@ def build_pair_list(x, r, walls, skin, old_pi=None, old_pj=None, old_ft=None) ->
 
 
 def finish_pair_list(x, r, walls, skin, pi, pj, ft) -> PairList:
-    """Incidence and wall-candidate lists for a given pair list (deterministic)."""
-    n = x.shape[0]
-    inc_off, inc_ent = kernels.incidence(pi, pj, n)
+    """Wall-candidate lists for a given pair list (deterministic)."""
     cand_off, cand = kernels.wall_candidates(x, r, np.asarray(walls, float), skin)
-    return PairList(pi, pj, ft, inc_off, inc_ent, cand_off, cand)
+    return PairList(pi, pj, ft, cand_off, cand)
 
 
 def brute_force_pairs(x, r, skin):

@@ -83,11 +83,10 @@ class Simulation:
         # exactly the candidate lists the original run had.
         self.pairs = finish_pair_list(self.x_ref, self.r, self.walls_ref, p.skin,
                                       c(state.pi, np.int32), c(state.pj, np.int32), c(state.ft))
-        self._alloc_pair_buffers()
         self.n_rebuilds = 0
         self.vmax_override = None  # wall speed cap override [m/s] (compaction only)
-        # fused one-thread kernel: None = whenever Numba runs one thread (same bits either way)
-        self.fused_serial = None
+        # blocks of disks run concurrently: None = one per Numba thread (same bits either way)
+        self.nblocks = None
 
     # ------------------------------------------------------------------------------
     @classmethod
@@ -108,11 +107,6 @@ class Simulation:
         sim.rebuild()
         return sim
 
-    def _alloc_pair_buffers(self):
-        npair = len(self.pairs.pi)
-        self.fpx = np.zeros(npair)
-        self.fpy = np.zeros(npair)
-
     def rebuild(self):
         """Rebuild the pair list at the current positions, carrying tangential history."""
         pl = self.pairs
@@ -121,7 +115,6 @@ class Simulation:
         self.x_ref[:] = self.x
         self.walls_ref[:] = self.walls
         self.fext[:] = 0.0
-        self._alloc_pair_buffers()
         self.n_rebuilds += 1
 
     def _needs_rebuild(self):
@@ -134,20 +127,18 @@ class Simulation:
         p = self.params
         mode, s_from, s_to, ramp_start, ramp_len, rate, len0 = self.control.arrays()
         left = int(nsteps)
-        serial = (numba.get_num_threads() == 1 if self.fused_serial is None
-                  else bool(self.fused_serial))
+        nblocks = numba.get_num_threads() if self.nblocks is None else int(self.nblocks)
         while left > 0:
             pl = self.pairs
             done = kernels.advance(
                 left, self.x, self.v, self.w, self.theta, self.r, self.m, self.inertia,
-                pl.pi, pl.pj, pl.ft, self.fpx, self.fpy, pl.inc_off, pl.inc_ent,
-                pl.cand_off, pl.cand, self.fext, self.fnet, self.x_ref, self.walls_ref,
-                self.disp2, self.walls, self.prev, self.wF, self.wK,
+                pl.pi, pl.pj, pl.ft, pl.cand_off, pl.cand, self.fext, self.fnet, self.x_ref,
+                self.walls_ref, self.disp2, self.walls, self.prev, self.wF, self.wK,
                 mode, s_from, s_to, ramp_start, ramp_len, rate, len0, self.step,
                 p.kn, p.kt, self.mu, self.cap_on, p.normal_damping_ratio, self.damping,
                 self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
                 self.vmax_override or p.servo_vmax,
-                0.5 * p.skin, serial)
+                0.5 * p.skin, nblocks)
             left -= done
             self.step += done
             self.time = self.step * self.dt

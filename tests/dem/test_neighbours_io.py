@@ -78,26 +78,33 @@ def test_save_load_continues_bit_identically(small_sample, tmp_path):
 
 
 def test_thread_count_does_not_change_results(small_sample):
-    # One thread runs the fused serial kernel, more threads the parallel contact and gather
-    # kernels: the two must agree to the bit, across neighbour-list rebuilds.
-    if numba.config.NUMBA_NUM_THREADS < 2:
-        pytest.skip("needs 2 threads to compare the serial and the parallel kernels")
+    # The disks are split into one block per thread (7 blocks here on top, more than the
+    # threads, so that many pairs cross blocks): every split must give the one-block result
+    # to the bit, across neighbour-list rebuilds.
+    from dem import kernels
     nt = numba.get_num_threads()
+    runs = []
     try:
-        numba.set_num_threads(1)
-        a = Simulation(small_sample)
-        a.set_control(biaxial(200e3, 2.0, a.ref_len))
-        a.run(2500)
-        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-        b = Simulation(small_sample)
-        b.set_control(biaxial(200e3, 2.0, b.ref_len))
-        b.run(2500)
+        for threads, nblocks in ((1, None), (numba.config.NUMBA_NUM_THREADS, None), (1, 7),
+                                 (numba.config.NUMBA_NUM_THREADS, 7)):
+            numba.set_num_threads(threads)
+            s = Simulation(small_sample)
+            s.nblocks = nblocks
+            s.set_control(biaxial(200e3, 2.0, s.ref_len))
+            s.run(2500)
+            runs.append(s)
     finally:
         numba.set_num_threads(nt)
-    assert a.n_rebuilds >= 1 and a.n_rebuilds == b.n_rebuilds
-    for u, z in ((a.x, b.x), (a.v, b.v), (a.w, b.w), (a.theta, b.theta), (a.walls, b.walls),
-                 (a.pairs.ft, b.pairs.ft), (a.fnet, b.fnet)):
-        assert np.array_equal(u, z)
+    pl = runs[0].pairs
+    bounds, kbounds = kernels.block_partition(pl.pi, runs[0].n, 7)
+    assert len(kernels.cross_pairs(pl.pj, bounds, kbounds)[0]) > 0.1 * len(pl.pi)
+    a = runs[0]
+    assert a.n_rebuilds >= 1
+    for b in runs[1:]:
+        assert a.n_rebuilds == b.n_rebuilds
+        for u, z in ((a.x, b.x), (a.v, b.v), (a.w, b.w), (a.theta, b.theta), (a.walls, b.walls),
+                     (a.pairs.ft, b.pairs.ft), (a.fnet, b.fnet)):
+            assert np.array_equal(u, z)
 
 
 def test_love_weber_equals_wall_stress_at_equilibrium(small_sample):

@@ -38,6 +38,7 @@ def cmd_probes(a):
                          run_probes)
     opts = ProbeOptions(norm=a.norm, ramp_steps=a.ramp_steps, unbalanced_tol=a.unbalanced_tol,
                         stress_tol=a.stress_tol, max_steps=a.max_steps,
+                        relax_max_steps=a.relax_max_steps,
                         plastic_tol=a.plastic_tol).validate()
     t0 = time.time()
     state, meta = io.load_state(a.state)
@@ -121,6 +122,8 @@ def main(argv=None):
     p.add_argument("--stress-tol", type=float, default=25.0, help="[Pa]")
     p.add_argument("--max-steps", type=int, default=400_000)
     p.add_argument("--plastic-tol", type=float, default=0.05)
+    p.add_argument("--relax-max-steps", type=int, default=2_000_000,
+                   help="cap of the relaxation of the state into the reference [steps]")
     p.add_argument("--no-relax", action="store_true",
                    help="probe from the saved state as is (no stress-controlled relaxation)")
     p.add_argument("--damping", type=float, default=None,

@@ -100,13 +100,21 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     if resume and os.path.exists(ref_path):
         stateR, meta = io.load_state(ref_path)
         ok = bool(meta.get("converged"))
+        if not ok:
+            # an earlier relaxation hit its cap: go on relaxing from where it stopped
+            _log("DEM: the saved reference is not in equilibrium: relaxing it further")
+            stateR, ok, steps, ub = prepare_reference(stateR, opts, verbose=True)
+            io.save_state(ref_path, stateR, meta={"converged": ok, "unbalanced": ub})
+            if os.path.exists(checkpoint):
+                os.remove(checkpoint)
     else:
         if os.path.exists(checkpoint):
             os.remove(checkpoint)
         state, _ = io.load_state(res.state_a_path)
         _log("DEM: relaxing A under stress control (the reference of the probes)")
-        stateR, ok, steps, ub = prepare_reference(state, opts)
-        io.save_state(ref_path, stateR, meta={"converged": ok})
+        stateR, ok, steps, ub = prepare_reference(state, opts, verbose=True)
+        io.save_state(ref_path, stateR, meta={"converged": ok, "unbalanced": ub})
+    _log(f"DEM: reference state converged={ok}")
     _log(f"DEM: probes ({pdir}, every finished run in {os.path.basename(checkpoint)})")
     probes = run_probes(stateR, directions() if alphas is None else list(alphas), opts,
                         workers=workers, verbose=True, checkpoint=checkpoint)

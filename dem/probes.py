@@ -38,6 +38,7 @@ class ProbeOptions(NamedTuple):
     unbalanced_tol: float = 1e-4    # equilibrium: unbalanced-force ratio below this
     stress_tol: float = 25.0        # and wall stresses within this of the target [Pa]
     max_steps: int = 400_000        # iteration cap (reported in the CSV, never silent)
+    relax_max_steps: int = 2_000_000  # cap of the relaxation of A into the reference R
     check_every: int = 1000         # equilibrium check interval [steps]
     plastic_tol: float = 0.05       # plastic if |de_p| > plastic_tol * |de_elastic|
 
@@ -47,6 +48,7 @@ class ProbeOptions(NamedTuple):
                   ("unbalanced_tol", 0 < self.unbalanced_tol < 1, "0 < unbalanced_tol < 1"),
                   ("stress_tol", 0 < self.stress_tol < self.norm, "0 < stress_tol < norm [Pa]"),
                   ("max_steps", self.max_steps > 0, "max_steps > 0"),
+                  ("relax_max_steps", self.relax_max_steps > 0, "relax_max_steps > 0"),
                   ("check_every", self.check_every > 0, "check_every > 0"),
                   ("plastic_tol", self.plastic_tol > 0, "plastic_tol > 0"))
         for name, ok, rng in checks:
@@ -89,7 +91,7 @@ def prepare_reference(state: State, opts: ProbeOptions = ProbeOptions(), verbose
                   f"s=({s_now[0]:.6g}, {s_now[1]:.6g}) Pa", file=sys.stderr, flush=True)
 
     ok, steps, ub, _ = equilibrate(sim, s, opts.stress_tol, opts.unbalanced_tol,
-                                   opts.max_steps, opts.check_every, progress=progress)
+                                   opts.relax_max_steps, opts.check_every, progress=progress)
     return sim.state(), ok, steps, ub
 
 

@@ -93,6 +93,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
         res = run_biaxial(DemParams(n=n, seed=seed), bdir, rate=rate, eta_a=eta_a, vtk=False,
                           resume=resume)
     opts = ProbeOptions() if max_steps is None else ProbeOptions(max_steps=int(max_steps))
+    t_probes0 = time.time()
     pdir = os.path.join(out_dir, "probes")
     os.makedirs(pdir, exist_ok=True)
     ref_path = os.path.join(pdir, "stateR.npz")
@@ -115,11 +116,16 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
         stateR, ok, steps, ub = prepare_reference(state, opts, verbose=True)
         io.save_state(ref_path, stateR, meta={"converged": ok, "unbalanced": ub})
     _log(f"DEM: reference state converged={ok}")
+    t_relaxed = time.time()
     _log(f"DEM: probes ({pdir}, every finished run in {os.path.basename(checkpoint)})")
     probes = run_probes(stateR, directions() if alphas is None else list(alphas), opts,
                         workers=workers, verbose=True, checkpoint=checkpoint)
+    stages = {"compaction + biaxial test (when it ran)": res.wall_time,
+              "relaxation of A (this run)": t_relaxed - t_probes0,
+              "probes (this run)": time.time() - t_relaxed}
     return {"biaxial_rows": res.rows, "state_a": res.state_a_path, "eta_a_reached": res.eta_a_reached,
-            "compaction": res.compaction, "probes": probes, "reference_converged": bool(ok)}
+            "compaction": res.compaction, "probes": probes, "reference_converged": bool(ok),
+            "stage_times": stages}
 
 
 # -- conclusions -------------------------------------------------------------------------------
@@ -432,6 +438,8 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
                        resume=resume)
         n_runs = 2 * len(dem["probes"])
         timings[f"DEM ({n} disks: compaction, biaxial, {n_runs} probe runs)"] = time.time() - t
+        for k, v in dem["stage_times"].items():
+            timings[f"  DEM {k}"] = v
     c = conclusions(h, dem["probes"] if dem else None, fem)
     figs = _figures(out_dir, h, dem, fem)
     config = {"full": full, "dem_n": n, "dem_seed": seed, "dem_rate": rate,

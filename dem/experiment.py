@@ -130,7 +130,10 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
             _progress(f"[biaxial] step {sim.step} eps1={e1:.5f} q={q/1e3:.2f} kPa eta={eta:.4f} "
                       f"eps_v={row[4]:.5f} unbalanced={row[12]:.1e} ({sps:.2e} particle-steps/s)")
         if checkpoint_every and len(rows) % checkpoint_every == 0 and not done:
-            io.save_state(ck_path, sim.state(), meta=dict(info, rows=rows))
+            # the wall time so far goes with the checkpoint, so a resumed run reports the total
+            io.save_state(ck_path, sim.state(), meta=dict(
+                info, rows=rows,
+                wall_time_before=info.get("wall_time_before", 0.0) + time.time() - t_start))
             io.write_csv(os.path.join(out_dir, "biaxial.csv"), COLUMNS, rows)
         if done:
             break

@@ -229,6 +229,11 @@ def _figures(out, h, dem, fem):
     sw = h["sweep"]
     o = np.argsort(sw.alpha_sigma)
     rows = dem["probes"] if dem else None
+    # a probe without equilibrium has no W2 (Eq. 15 needs equilibrium at both ends): NaN, so
+    # that the curves break there, and the count in the legend
+    conv = lambda k: [float(r[k]) if r["converged"] else np.nan for r in rows]
+    n_failed = sum(1 for r in rows if not r["converged"]) if rows else 0
+    failed_note = f" ({n_failed} without equilibrium not drawn)" if n_failed else ""
 
     def polar(ax, a_deg, w, style, label):
         a = np.radians(np.asarray(a_deg, float))
@@ -275,7 +280,8 @@ def _figures(out, h, dem, fem):
     axs[0].set_title("H-model at A (Fig. 8)")
     if rows:
         a = [r["alpha_sigma"] for r in rows] + [rows[0]["alpha_sigma"]]
-        polar(axs[1], a, [r["w2"] for r in rows] + [rows[0]["w2"]], "C0o-", "DEM W2 (45 stress probes)")
+        polar(axs[1], a, conv("w2") + conv("w2")[:1], "C0o-",
+              f"DEM W2 ({len(rows)} stress probes{failed_note})")
     axs[1].set_title("DEM at A (Fig. 15)")
     for ax in axs:
         ax.legend(fontsize=8, loc="upper left")
@@ -289,10 +295,10 @@ def _figures(out, h, dem, fem):
     axs[0].set_title("H-model: micro and macro W2 (identical to round-off)")
     if rows:
         a = np.array([r["alpha_sigma"] for r in rows])
-        axs[1].plot(a, [r["w2"] for r in rows], "o-", label="macro W2 (walls)")
-        axs[1].plot(a, [r["w2_micro"] for r in rows], "s--", label="micro: sum df.dl over grain contacts")
+        axs[1].plot(a, conv("w2"), "o-", label="macro W2 (walls)" + failed_note)
+        axs[1].plot(a, conv("w2_micro"), "s--", label="micro: sum df.dl over grain contacts")
         pl = np.array([r["plastic"] for r in rows], bool)
-        axs[1].plot(a[pl], np.array([r["w2"] for r in rows])[pl], "x", color="C3", label="plastic probe")
+        axs[1].plot(a[pl], np.array(conv("w2"))[pl], "x", color="C3", label="plastic probe")
     axs[1].set_title("DEM (Fig. 16)")
     for ax in axs:
         _angle_axes(ax)
@@ -307,9 +313,9 @@ def _figures(out, h, dem, fem):
     axs[0].set_title("H-model (Fig. 11)")
     if rows:
         a = np.array([r["alpha_sigma"] for r in rows])
-        axs[1].plot(a, [r["w2n"] for r in rows], "o-", label="W2n (normal)")
-        axs[1].plot(a, [r["w2t"] for r in rows], "s-", label="W2t (tangential)")
-        axs[1].plot(a, [r["w2"] for r in rows], "k:", lw=0.8, label="W2 macro")
+        axs[1].plot(a, conv("w2n"), "o-", label="W2n (normal)" + failed_note)
+        axs[1].plot(a, conv("w2t"), "s-", label="W2t (tangential)")
+        axs[1].plot(a, conv("w2"), "k:", lw=0.8, label="W2 macro")
     axs[1].set_title("DEM (Fig. 17)")
     for ax in axs:
         _angle_axes(ax)

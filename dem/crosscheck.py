@@ -120,6 +120,11 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     _log(f"DEM: probes ({pdir}, every finished run in {os.path.basename(checkpoint)})")
     probes = run_probes(stateR, directions() if alphas is None else list(alphas), opts,
                         workers=workers, verbose=True, checkpoint=checkpoint)
+    from .probes import COLUMNS as PROBE_COLUMNS, plot_probes
+    io.write_csv(os.path.join(pdir, "probes.csv"), PROBE_COLUMNS,
+                 [[int(r[k]) if isinstance(r[k], bool) else r[k] for k in PROBE_COLUMNS]
+                  for r in probes])
+    plot_probes(probes, pdir)
     stages = {"compaction + biaxial test (when it ran)": res.wall_time,
               "relaxation of A (this run)": t_relaxed - t_probes0,
               "probes (this run)": time.time() - t_relaxed}

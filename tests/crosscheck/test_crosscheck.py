@@ -31,6 +31,11 @@ def test_outputs_written(xc):
     for f in ("fig_stress_strain.png", "fig_polar_w2.png", "fig_micro_macro.png",
               "fig_normal_tangential.png", "fig_domain.png"):
         assert (out / f).stat().st_size > 20_000 and f"({f})" in rep
+    pdir = out / "dem" / "probes"
+    for f in ("fig15_w2.png", "fig16_w2_micro.png", "fig17_w2_nt.png"):
+        assert (pdir / f).stat().st_size > 20_000
+    header = (pdir / "probes.csv").read_text().splitlines()
+    assert header[0].startswith("alpha_sigma,w2,w2_micro,w2n,w2t") and len(header) == 1 + len(ALPHAS)
     saved = json.loads((out / "conclusions.json").read_text())
     assert saved["conclusions"]["hmodel"]["cone_w2"] == c["hmodel"]["cone_w2"]
 

@@ -6,6 +6,10 @@ import os
 import sys
 import time
 
+from hmodel import options as opt     # the command-line rules shared by every CLI
+
+from .threads import available_threads
+
 
 def _params(a):
     from .params import DemParams
@@ -13,10 +17,21 @@ def _params(a):
                      friction_deg=a.friction)
 
 
+def _directions(a):
+    from .probes import directions
+    if a.directions:
+        if len(set(a.directions)) != len(a.directions):
+            raise opt.OptionError(f"--directions {a.directions}: allowed distinct angles [deg]")
+        return [float(v) for v in a.directions]
+    return directions(a.step_q3, a.step_other)
+
+
 def _threads(a):
-    if getattr(a, "threads", None):
-        import numba
-        numba.set_num_threads(min(a.threads, numba.config.NUMBA_NUM_THREADS))
+    from .threads import set_default_threads
+    set_default_threads(getattr(a, "threads", None))
+
+
+THREADS = opt.integer(1, available_threads())
 
 
 def cmd_biaxial(a):
@@ -25,58 +40,84 @@ def cmd_biaxial(a):
     t0 = time.time()
     res = run_biaxial(_params(a), a.out, rate=a.rate, confining=a.confining, eta_a=a.eta_a,
                       eps_max=a.eps_max, compaction_friction_deg=a.compaction_friction,
-                      resume=a.resume, vtk=not a.no_vtk)
+                      resume=a.resume, vtk=not a.no_vtk,
+                      save_fractions=tuple(a.save_fractions), save_etas=tuple(a.save_etas))
     print(f"biaxial: {len(res.rows)} rows -> {os.path.join(a.out, 'biaxial.csv')}; "
           f"stateA={res.state_a_path} (eta_a reached: {res.eta_a_reached}); "
           f"porosity after compaction={res.compaction.get('porosity')}; "
           f"wall time {time.time() - t0:.1f} s")
 
 
+def _probe_options(a):
+    from .probes import ProbeOptions
+    return ProbeOptions(norm=a.norm, ramp_steps=a.ramp_steps, unbalanced_tol=a.unbalanced_tol,
+                        stress_tol=a.stress_tol, max_steps=a.max_steps,
+                        relax_max_steps=a.relax_max_steps, plastic_tol=a.plastic_tol,
+                        strain_tol=a.strain_tol, ke_tol=a.ke_tol, window=a.window,
+                        runaway_ratio=a.runaway_ratio, fail_ratio=a.fail_ratio).validate()
+
+
 def cmd_probes(a):
     from . import io
-    from .probes import (COLUMNS, ProbeOptions, directions, plot_probes, prepare_reference,
-                         run_probes)
-    opts = ProbeOptions(norm=a.norm, ramp_steps=a.ramp_steps, unbalanced_tol=a.unbalanced_tol,
-                        stress_tol=a.stress_tol, max_steps=a.max_steps,
-                        relax_max_steps=a.relax_max_steps,
-                        plastic_tol=a.plastic_tol).validate()
+    from .probes import reference_state, run_probes, write_probe_files
+    opts = _probe_options(a)
+    alphas = _directions(a)
+    _threads(a)
     t0 = time.time()
     state, meta = io.load_state(a.state)
     if a.damping is not None:
         state = state._replace(params=state.params.replace(damping=a.damping))
     os.makedirs(a.out, exist_ok=True)
     ck = os.path.join(a.out, "probe_runs.jsonl")
-    ref_path = os.path.join(a.out, "stateR.npz")
     if not a.resume and os.path.exists(ck):
-        os.remove(ck)
-    if a.no_relax:
-        pass
-    elif a.resume and os.path.exists(ref_path):
-        state, meta = io.load_state(ref_path)
-        print(f"[probes] resumed: reference state {ref_path} ({meta})", file=sys.stderr)
-    else:
-        state, ok, steps, ub = prepare_reference(state, opts, verbose=True)
-        print(f"[probes] reference relaxed at the A stresses: converged={ok} steps={steps} "
-              f"unbalanced={ub:.2e}", file=sys.stderr)
-        io.save_state(ref_path, state, meta={"converged": ok, "steps": steps, "unbalanced": ub})
-    alphas = directions(a.step_q3, a.step_other)
+        # keep the earlier sweep until the new one replaces it
+        os.replace(ck, os.path.join(a.out, "probe_runs.previous.jsonl"))
+        print(f"[probes] {a.out} held an earlier sweep: moved to probe_runs.previous.jsonl; "
+              "probes.csv and the figures are replaced at the end (--resume keeps a sweep)",
+              file=sys.stderr)
+    state, ref = reference_state(state, a.out, opts, relax=not a.no_relax, resume=a.resume)
     rows = run_probes(state, alphas, opts, workers=a.workers, scheduler=a.scheduler,
                       checkpoint=ck)
-    io.write_csv(os.path.join(a.out, "probes.csv"), COLUMNS,
-                 [[r[c] if not isinstance(r[c], bool) else int(r[c]) for c in COLUMNS]
-                  for r in rows])
-    plot_probes(rows, a.out)
-    nc = sum(1 for r in rows if not (r["converged"] and r["converged_elastic"]))
+    s2 = state.control.s_to[0]
+    write_probe_files(rows, a.out, note=f"{state.params.n} disks, $\\sigma_2$ = {s2 / 1e3:.0f} kPa")
+    from collections import Counter
+    cnt = Counter(r["outcome"] for r in rows)
+    summary = {"state": os.path.abspath(a.state), "reference": ref, "n_disks": state.params.n,
+               "sigma2": s2, "directions": len(rows), "outcomes": dict(cnt),
+               "options": opts._asdict(), "wall_time": time.time() - t0}
+    from . import io as dio
+    import json
+    dio.atomic_write_bytes(os.path.join(a.out, "summary.json"),
+                           json.dumps(summary, indent=1, default=float).encode())
     print(f"probes: {len(rows)} directions -> {os.path.join(a.out, 'probes.csv')}; "
-          f"{nc} hit the iteration cap; wall time {time.time() - t0:.1f} s")
+          f"reference: {ref}; " + ", ".join(f"{cnt[k]} {k}" for k in ("equilibrium", "failure",
+                                                                       "undecided"))
+          + f"; wall time {time.time() - t0:.1f} s")
+
+
+def cmd_domain(a):
+    from .domain import run_domain
+    opts = _probe_options(a)
+    alphas = _directions(a)
+    _threads(a)
+    t0 = time.time()
+    states = [s for s in a.states.split(",") if s] if a.states else None
+    rows, b, _ = run_domain(a.biaxial, a.out, states=states, alphas=alphas, opts=opts,
+                         workers=a.workers, scheduler=a.scheduler, resume=a.resume,
+                         hmodel=not a.no_hmodel)
+    print(f"domain: {len(rows)} states -> {os.path.join(a.out, 'domain.csv')}; lower boundary: "
+          f"{b['lower_state']} (eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the "
+          f"peak {b['eta_peak']:.4f}, {b['lower_why']}); eta_lim in [{b['eta_lim_low']:.4f}, "
+          f"{b['eta_lim_high']:.4f}]; wall time {time.time() - t0:.1f} s")
 
 
 def cmd_bench(a):
     from .bench import bench
-    res = bench(n=a.n, steps=a.steps, seed=a.seed, cache_dir=a.cache)
+    res = bench(n=a.n, steps=a.steps, seed=a.seed, cache_dir=a.cache, busy=a.busy_core,
+                rounds=a.rounds)
     for k, v in res.items():
         print(f"{k}: {v}")
-    print(f"particle-steps/s: {res['particle_steps_per_s_all_threads']:.4g}")
+    print(f"particle-steps/s: {res['particle_steps_per_s_auto']:.4g}")
 
 
 def cmd_crosscheck(a):
@@ -84,85 +125,148 @@ def cmd_crosscheck(a):
     t0 = time.time()
     c, timings = run_crosscheck(a.out, full=a.full, n=a.n, seed=a.seed, rate=a.rate,
                                 workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
-                                dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume)
+                                dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
+                                dem_domain=a.dem_domain)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m dem", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
+    ap = opt.Parser(prog="python -m dem", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True, parser_class=opt.Parser)
 
     b = sub.add_parser("biaxial", help="compact and run the drained biaxial test")
-    b.add_argument("--n", type=int, default=12000)
-    b.add_argument("--seed", type=int, default=1)
+    b.add_argument("--n", type=opt.integer(1, 10_000_000), default=12000)
+    b.add_argument("--seed", type=opt.integer(0), default=1)
     b.add_argument("--out", required=True)
-    b.add_argument("--rate", type=float, default=0.01, help="axial strain rate [1/s]")
-    b.add_argument("--confining", type=float, default=200e3, help="[Pa]")
-    b.add_argument("--eta-a", type=float, default=1.029)
-    b.add_argument("--eps-max", type=float, default=0.10)
-    b.add_argument("--damping", type=float, default=0.15)
-    b.add_argument("--dt-safety", type=float, default=0.2)
-    b.add_argument("--friction", type=float, default=35.0, help="[deg]")
-    b.add_argument("--compaction-friction", type=float, default=0.0, help="[deg]")
+    b.add_argument("--rate", type=opt.real(0, 10), default=0.01, help="axial strain rate [1/s]")
+    b.add_argument("--confining", type=opt.real(0, 1e9), default=200e3, help="[Pa]")
+    b.add_argument("--eta-a", type=opt.real(0, 2), default=1.029,
+                   help="eta = q/p of point A (p = (s1 + s2)/2)")
+    b.add_argument("--eps-max", type=opt.real(0, 0.5), default=0.10)
+    b.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=0.15)
+    b.add_argument("--dt-safety", type=opt.real(0, 1), default=0.2)
+    b.add_argument("--friction", type=opt.real(0, 90, lo_open=False), default=35.0, help="[deg]")
+    b.add_argument("--compaction-friction", type=opt.real(0, 90, lo_open=False), default=0.0,
+                   help="[deg]")
+    b.add_argument("--save-fractions", type=opt.reals(0, 1, hi_open=False),
+                   default=[0.8, 0.85, 0.9, 0.93, 0.95, 0.97],
+                    help="save the first state at these fractions of the peak eta in DIR/states "
+                        "(for `dem domain`); comma-separated, in (0, 1]")
+    b.add_argument("--save-etas", type=opt.reals(0, 2), default=[],
+                    help="also save the first state at these absolute eta (comma-separated)")
     b.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz")
     b.add_argument("--no-vtk", action="store_true")
-    b.add_argument("--threads", type=int, default=None,
-                   help="numba threads (results do not depend on it; default: all)")
+    b.add_argument("--threads", type=THREADS, default=None,
+                    help="threads (results do not depend on it); default: auto, see dem.threads")
     b.set_defaults(func=cmd_biaxial)
 
-    p = sub.add_parser("probes", help="directional analysis from a saved state")
+    po = opt.Parser(add_help=False)     # options of every directional analysis
+    po.add_argument("--norm", type=opt.real(0, 1e8), default=2500.0, help="|dsigma| [Pa]")
+    po.add_argument("--step-q3", type=opt.real(0, 90, hi_open=False), default=5.0,
+                    help="[deg] in the third quadrant")
+    po.add_argument("--step-other", type=opt.real(0, 90, hi_open=False), default=10.0,
+                    help="[deg] elsewhere")
+    po.add_argument("--directions", type=opt.reals(0, 360, lo_open=False), default=None,
+                    help="comma-separated alpha_sigma [deg] in place of --step-q3/--step-other")
+    po.add_argument("--ramp-steps", type=opt.integer(0), default=5000)
+    po.add_argument("--unbalanced-tol", type=opt.real(0, 1), default=1e-4)
+    po.add_argument("--stress-tol", type=opt.real(0), default=25.0, help="[Pa]")
+    po.add_argument("--max-steps", type=opt.integer(1), default=400_000,
+                    help="cap of a probe run [steps]: undecided when reached")
+    po.add_argument("--strain-tol", type=opt.real(0, 1), default=0.01,
+                    help="equilibrium: strain drift over the window / |de|")
+    po.add_argument("--ke-tol", type=opt.real(0), default=1e-10,
+                    help="equilibrium: backbone kinetic energy per disk [J]")
+    po.add_argument("--window", type=opt.integer(1000), default=20_000,
+                    help="equilibrium window at 1000 disks [steps] (scaled with sqrt(n))")
+    po.add_argument("--runaway-ratio", type=opt.real(1), default=100.0,
+                    help="failure: |de|/|de_elastic| beyond this with the wall stresses lost")
+    po.add_argument("--fail-ratio", type=opt.real(1), default=1000.0,
+                    help="failure: |de|/|de_elastic| beyond this")
+    po.add_argument("--threads", type=THREADS, default=None,
+                    help="threads of the relaxation (each probe runs on one); default: auto")
+    po.add_argument("--plastic-tol", type=opt.real(0), default=0.05)
+    po.add_argument("--relax-max-steps", type=opt.integer(1), default=2_000_000,
+                    help="cap of the relaxation of the state into the reference [steps]")
+    po.add_argument("--workers", type=opt.integer(1, 1024), default=None, help="local processes")
+    po.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+
+    p = sub.add_parser("probes", parents=[po], help="directional analysis from a saved state")
     p.add_argument("--state", required=True)
     p.add_argument("--out", required=True)
-    p.add_argument("--norm", type=float, default=2500.0, help="|dsigma| [Pa]")
-    p.add_argument("--step-q3", type=float, default=5.0, help="[deg] in the third quadrant")
-    p.add_argument("--step-other", type=float, default=10.0, help="[deg] elsewhere")
-    p.add_argument("--ramp-steps", type=int, default=5000)
-    p.add_argument("--unbalanced-tol", type=float, default=1e-4)
-    p.add_argument("--stress-tol", type=float, default=25.0, help="[Pa]")
-    p.add_argument("--max-steps", type=int, default=400_000)
-    p.add_argument("--plastic-tol", type=float, default=0.05)
-    p.add_argument("--relax-max-steps", type=int, default=2_000_000,
-                   help="cap of the relaxation of the state into the reference [steps]")
     p.add_argument("--no-relax", action="store_true",
-                   help="probe from the saved state as is (no stress-controlled relaxation)")
-    p.add_argument("--damping", type=float, default=None,
-                   help="override the Cundall damping of the state (sensitivity check)")
-    p.add_argument("--workers", type=int, default=None, help="local processes")
-    p.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+                    help="probe from the saved state as is (no stress-controlled relaxation)")
+    p.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=None,
+                    help="override the Cundall damping of the state (sensitivity check)")
     p.add_argument("--resume", action="store_true",
-                   help="keep the runs already in DIR/probe_runs.jsonl (and DIR/stateR.npz) "
+                    help="keep the runs already in DIR/probe_runs.jsonl (and DIR/stateR.npz) "
                         "and run only the missing ones")
     p.set_defaults(func=cmd_probes)
 
+    d = sub.add_parser("domain", parents=[po],
+                       help="the DEM's bifurcation domain: directional analyses of the states "
+                            "saved along a biaxial test")
+    d.add_argument("--biaxial", required=True, help="output folder of `dem biaxial`")
+    d.add_argument("--out", required=True)
+    d.add_argument("--states", default=None,
+                    help="comma-separated states (file names or targets of DIR/states/states.csv, "
+                        "e.g. f=0.9,f=0.95); default: all")
+    d.add_argument("--no-hmodel", action="store_true",
+                    help="leave the H-model's boundary out of the figure")
+    d.add_argument("--resume", action="store_true",
+                    help="keep the references and probe runs already in the output folder")
+    d.set_defaults(func=cmd_domain)
+
     c = sub.add_parser("bench", help="particle-steps/s on a dense confined sample")
-    c.add_argument("--n", type=int, default=12000)
-    c.add_argument("--steps", type=int, default=2000)
-    c.add_argument("--seed", type=int, default=1)
+    c.add_argument("--n", type=opt.integer(2, 10_000_000), default=12000)
+    c.add_argument("--steps", type=opt.integer(1), default=2000)
+    c.add_argument("--seed", type=opt.integer(0), default=1)
     c.add_argument("--cache", default=os.path.join(os.path.expanduser("~"), ".cache", "dem"))
+    c.add_argument("--rounds", type=opt.integer(1, 100), default=1, help="interleaved rounds")
+    c.add_argument("--busy-core", action="store_true",
+                    help="measure beside a busy-loop process (a shared machine)")
     c.set_defaults(func=cmd_bench)
 
     x = sub.add_parser("crosscheck", help="H-model, FE and DEM side by side (report.md + figures)")
     x.add_argument("--out", required=True)
-    x.add_argument("--full", action="store_true", help="the paper's 12,000 disks at 0.01/s (about 1.5 h)")
-    x.add_argument("--n", type=int, default=None, help="DEM disks (default 1000, 12000 with --full)")
-    x.add_argument("--seed", type=int, default=1)
-    x.add_argument("--rate", type=float, default=None, help="DEM axial strain rate [1/s] (0.05, 0.01 with --full)")
-    x.add_argument("--max-steps", type=int, default=None, help="cap of each DEM probe run [steps]")
-    x.add_argument("--workers", type=int, default=None, help="local processes for the probes")
+    x.add_argument("--full", action="store_true", help="the paper's 12,000 disks at 0.01/s (see README for the time)")
+    x.add_argument("--n", type=opt.integer(2, 10_000_000), default=None, help="DEM disks (default 1000, 12000 with --full)")
+    x.add_argument("--seed", type=opt.integer(0), default=1)
+    x.add_argument("--rate", type=opt.real(0, 10), default=None, help="DEM axial strain rate [1/s] (0.05, 0.01 with --full)")
+    x.add_argument("--max-steps", type=opt.integer(1), default=None, help="cap of each DEM probe run [steps]")
+    x.add_argument("--workers", type=opt.integer(1, 1024), default=None, help="local processes for the probes")
     x.add_argument("--skip-dem", action="store_true", help="H-model and FE only")
     x.add_argument("--no-domain", action="store_true", help="skip the H-model bifurcation domain")
-    x.add_argument("--threads", type=int, default=None,
-                   help="numba threads of the DEM compaction and biaxial test (default: all)")
+    x.add_argument("--threads", type=THREADS, default=None,
+                    help="threads of the DEM compaction, biaxial test and relaxations "
+                        "(results do not depend on it); default: auto, see dem.threads")
     x.add_argument("--resume", action="store_true",
-                   help="keep the DEM work an interrupted run left in DIR/dem and do the rest")
+                    help="keep the DEM work an interrupted run left in DIR/dem and do the rest")
+    x.add_argument("--dem-domain", action=argparse.BooleanOptionalAction, default=None,
+                    help="directional analyses at every saved DEM state (the DEM's bifurcation "
+                         "domain); default: on, off with --full (use `dem domain` there)")
     x.set_defaults(func=cmd_crosscheck)
 
-    a = ap.parse_args(argv)
-    try:
+    def run(a, stage):
+        if hasattr(a, "out"):
+            opt.check_out_dir(a.out)
+        if a.cmd in ("probes", "domain") and a.scheduler and a.workers:
+            raise opt.OptionError("--workers and --scheduler: allowed one of them")
+        stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"
+                                   if hasattr(a, "resume") else ""))
+        from . import kernels
+        if opt.announce_compilation([kernels.advance, kernels.build_pairs, kernels.contact_snapshot]):
+            from .simulation import compile_kernels
+            t = time.time()
+            compile_kernels()         # before the command's own timers start
+            print(f"compiled in {time.time() - t:.1f} s", file=sys.stderr, flush=True)
         a.func(a)
-    except ValueError as e:
-        ap.exit(2, f"error: {e}\n")
+        return 0
+
+    code = opt.run_cli(ap, argv, run, errors=(ValueError, RuntimeError))
+    if code:
+        sys.exit(code)
 
 
 if __name__ == "__main__":

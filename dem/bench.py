@@ -1,15 +1,23 @@
-"""Throughput benchmark: particle-steps/s on a dense sample confined at 200 kPa."""
+"""Throughput benchmark: particle-steps/s on a dense sample confined at 200 kPa.
+
+``bench`` measures, in one process and one sitting, the same sample stepped on one thread,
+on the default choice (``auto``, see ``dem.threads``) and on every thread, optionally while a
+busy-loop process keeps a core occupied (what a shared 2-core machine looks like).  The rounds
+are interleaved so that a change of the machine's load hits every variant alike.
+"""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import time
 
-import numba
 import numpy as np
 
 from . import io
 from .params import DemParams
 from .sample import compact
+from .threads import ThreadChooser, available_threads
 
 
 def confined_sample(n=12000, seed=1, cache_dir=None):
@@ -28,22 +36,50 @@ def confined_sample(n=12000, seed=1, cache_dir=None):
 
 
 def _rate(state, steps, threads):
+    """particle-steps/s of ``steps`` steps from ``state`` (wall time); threads None = auto."""
     from .simulation import Simulation
-    numba.set_num_threads(threads)
     sim = Simulation(state)
+    sim.threads = ThreadChooser(sim.n, threads)
     sim.run(10)  # warm-up (compilation is cached)
     t = time.perf_counter()
     sim.run(steps)
     return sim.n * steps / (time.perf_counter() - t)
 
 
-def bench(n=12000, steps=2000, seed=1, cache_dir=None):
-    """Returns a dict with particle-steps/s on one thread and on all threads (wall time, in
-    the same process) and their ratio."""
+class busy_core:
+    """Context manager: a process spinning on one core while the block runs."""
+
+    def __enter__(self):
+        self.p = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+        time.sleep(0.2)
+        return self
+
+    def __exit__(self, *exc):
+        self.p.kill()
+        self.p.wait()
+
+
+def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3):
+    """Medians over ``rounds`` interleaved rounds of particle-steps/s on one thread, on the
+    default (auto) and on all threads, and their ratios to one thread; ``busy``: with a
+    busy-loop process beside the run."""
     st = confined_sample(n, seed, cache_dir)
-    nt = numba.config.NUMBA_NUM_THREADS
-    one = _rate(st, steps, 1)
-    allt = _rate(st, steps, nt)
-    numba.set_num_threads(nt)
-    return {"n": n, "steps": steps, "threads": nt, "particle_steps_per_s_1_thread": one,
-            "particle_steps_per_s_all_threads": allt, "thread_speedup": allt / one}
+    nt = available_threads()
+    variants = {"1_thread": 1, "auto": None, f"{nt}_threads": nt}
+    got = {k: [] for k in variants}
+    ctx = busy_core() if busy else None
+    if ctx:
+        ctx.__enter__()
+    try:
+        for _ in range(rounds):
+            for k, th in variants.items():
+                got[k].append(_rate(st, steps, th))
+    finally:
+        if ctx:
+            ctx.__exit__(None, None, None)
+    med = {k: float(np.median(v)) for k, v in got.items()}
+    out = {"n": n, "steps": steps, "busy_core": bool(busy), "threads_available": nt}
+    for k, v in med.items():
+        out[f"particle_steps_per_s_{k}"] = v
+        out[f"ratio_{k}_to_1_thread"] = v / med["1_thread"]
+    return out

@@ -58,25 +58,61 @@ def fem_part(out_dir, nx=4, ny=8, n_dir=72, eps1_max=0.03):
     return {"curve": res.curve, "events": res.events, "summary": res.summary, "n_dir": n_dir}
 
 
+# eta = q/p with p = (s1 + s2)/2 of the state whose eta is 1.029 with p = (s1 + 2 s2)/3 (one
+# reading of the paper's DEM section): with x = q/s2, 3x/(3 + x) = 1.029 gives x = 1.5662 and
+# 2x/(2 + x) = 0.8784, whatever s2
+ETA_P3 = 1.029
+ETA2_OF_P3 = 2 * (3 * ETA_P3 / (3 - ETA_P3)) / (2 + 3 * ETA_P3 / (3 - ETA_P3))
+
+
+def comparison_state(refs, norm, alphas):
+    """The DEM state of the comparison (Figs. 15-17 beside the H-model's A), by rule: the
+    highest saved state whose reference R held at constant stress and whose every probe target
+    stays below the largest stress ratio held by a reference (a lower bound of the strength
+    under stress control eta_lim) and below the smallest one that ran away (a small sample's
+    curve is jagged, so the two can cross): eta_R + max_eta_increment <= limit.  Every probe
+    target then lies where the sample can hold it, so every direction can be decided.
+
+    ``refs``: [(name, State R, outcome, meta)].  Returns (name, dict of the rule's numbers);
+    when no state satisfies the rule, the lowest state whose reference held, flagged."""
+    from .domain import _eta, max_eta_increment
+    held = [(nm, R) for nm, R, oc, _ in refs if oc == "equilibrium"]
+    if not held:
+        raise RuntimeError("no saved DEM state could be held at constant stress")
+    eta_r = {nm: _eta(R.control.s_to[1], R.control.s_to[0]) for nm, R in held}
+    lim_low = max(eta_r.values())
+    failed = [_eta(R.control.s_to[1], R.control.s_to[0]) for nm, R, oc, _ in refs if oc == "failure"]
+    inc = {nm: max_eta_increment(R, norm, alphas) for nm, R in held}
+    limit = min([lim_low] + failed)
+    ok = [nm for nm in eta_r if eta_r[nm] + inc[nm] <= limit]
+    name = max(ok, key=eta_r.get) if ok else min(eta_r, key=eta_r.get)
+    return name, {"state": name, "eta_R": eta_r[name], "max_eta_increment": inc[name],
+                  "eta_held_max": lim_low, "eta_failed_min": min(failed) if failed else None,
+                  "limit": limit,
+                  "rule_met": bool(ok)}
+
+
 def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, threads=None,
-             alphas=None, max_steps=None, resume=False):
-    """DEM: compaction, drained biaxial test, probes at A (default: the paper's 45 directions,
-    each twice; ``max_steps`` caps each probe run, reported in the rows when hit).
+             alphas=None, max_steps=None, resume=False, domain=True, hmodel_boundary=None):
+    """DEM: compaction, drained biaxial test with states saved along the path, their
+    relaxation under stress control, and the directional analysis (default: the paper's 45
+    directions, each twice) at the comparison state chosen by ``comparison_state``
+    and, with ``domain``, at every saved state that holds (the DEM's bifurcation domain,
+    ``dem.domain``).  ``max_steps`` caps each probe run (undecided when reached).
 
-    ``threads``: Numba threads of the compaction and the biaxial test (default: all; the
-    results do not depend on it); the probes run one thread each in ``workers`` processes.
-    ``resume``: keep what an interrupted run in ``out_dir`` finished (the biaxial test or its
-    checkpoint, the relaxed reference state, the probe runs already on disk).
+    ``threads``: threads of the compaction, the biaxial test (default: auto; the results do
+    not depend on it); the relaxations and probes run one thread each in ``workers``
+    processes.  ``resume``: keep what an interrupted run in ``out_dir`` finished (the biaxial
+    test or its checkpoint, the relaxed references, the probe runs already on disk).
     """
-    import numba
-
     from . import io
-    from .experiment import COLUMNS, BiaxialResult, run_biaxial
+    from .domain import run_domain
+    from .experiment import COLUMNS, SAVE_FRACTIONS, BiaxialResult, run_biaxial
     from .params import DemParams
-    from .probes import ProbeOptions, directions, prepare_reference, run_probes
+    from .probes import ProbeOptions, directions
+    from .threads import set_default_threads
 
-    numba.set_num_threads(min(threads or numba.config.NUMBA_NUM_THREADS,
-                              numba.config.NUMBA_NUM_THREADS))
+    set_default_threads(threads)
     bdir = os.path.join(out_dir, "biaxial")
     summary_path = os.path.join(bdir, "summary.json")
     a_path = os.path.join(bdir, "stateA.npz")
@@ -90,47 +126,53 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
                             float(summ["wall_time"]))
         _log(f"DEM: biaxial test taken from {bdir} ({len(rows)} rows)")
     else:
+        # the states along the path; 1.0 (the peak, above what constant stress holds)
+        # brackets eta_lim from above
         res = run_biaxial(DemParams(n=n, seed=seed), bdir, rate=rate, eta_a=eta_a, vtk=False,
-                          resume=resume)
+                          resume=resume, save_fractions=SAVE_FRACTIONS + (1.0,),
+                          save_etas=(ETA2_OF_P3,))
     opts = ProbeOptions() if max_steps is None else ProbeOptions(max_steps=int(max_steps))
+    alphas = directions() if alphas is None else [float(a) for a in alphas]
     t_probes0 = time.time()
-    pdir = os.path.join(out_dir, "probes")
-    os.makedirs(pdir, exist_ok=True)
-    ref_path = os.path.join(pdir, "stateR.npz")
-    checkpoint = os.path.join(pdir, "probe_runs.jsonl")
-    if resume and os.path.exists(ref_path):
-        stateR, meta = io.load_state(ref_path)
-        ok = bool(meta.get("converged"))
-        if not ok:
-            # an earlier relaxation hit its cap: go on relaxing from where it stopped
-            _log("DEM: the saved reference is not in equilibrium: relaxing it further")
-            stateR, ok, steps, ub = prepare_reference(stateR, opts, verbose=True)
-            io.save_state(ref_path, stateR, meta={"converged": ok, "unbalanced": ub})
-            if os.path.exists(checkpoint):
-                os.remove(checkpoint)
-    else:
-        if os.path.exists(checkpoint):
-            os.remove(checkpoint)
-        state, _ = io.load_state(res.state_a_path)
-        _log("DEM: relaxing A under stress control (the reference of the probes)")
-        stateR, ok, steps, ub = prepare_reference(state, opts, verbose=True)
-        io.save_state(ref_path, stateR, meta={"converged": ok, "unbalanced": ub})
-    _log(f"DEM: reference state converged={ok}")
-    t_relaxed = time.time()
-    _log(f"DEM: probes ({pdir}, every finished run in {os.path.basename(checkpoint)})")
-    probes = run_probes(stateR, directions() if alphas is None else list(alphas), opts,
-                        workers=workers, verbose=True, checkpoint=checkpoint)
-    from .probes import COLUMNS as PROBE_COLUMNS, plot_probes
-    io.write_csv(os.path.join(pdir, "probes.csv"), PROBE_COLUMNS,
-                 [[int(r[k]) if isinstance(r[k], bool) else r[k] for k in PROBE_COLUMNS]
-                  for r in probes])
-    plot_probes(probes, pdir)
+    chosen = {}
+
+    def choose(refs):
+        name, info = comparison_state(refs, opts.norm, alphas)
+        chosen.update(info)
+        _log(f"DEM: comparison state {name} (eta_R {info['eta_R']:.4f}, largest probe increment "
+             f"{info['max_eta_increment']:.4f}, largest eta held {info['eta_held_max']:.4f}; "
+             f"rule met: {info['rule_met']})")
+        return [nm for nm, _, oc, _ in refs if domain and oc == "equilibrium"] + [name]
+
+    ddir = os.path.join(out_dir, "domain")
+    drows, bounds, probes_by = run_domain(bdir, ddir, alphas=alphas, opts=opts, workers=workers,
+                                          resume=resume, hmodel=hmodel_boundary or False,
+                                          choose=choose)
+    probes = probes_by[chosen["state"]]
     stages = {"compaction + biaxial test (when it ran)": res.wall_time,
-              "relaxation of A (this run)": t_relaxed - t_probes0,
-              "probes (this run)": time.time() - t_relaxed}
+              "relaxations and probes (this run)": time.time() - t_probes0}
+    eta_peak = bounds["eta_peak"]
     return {"biaxial_rows": res.rows, "state_a": res.state_a_path, "eta_a_reached": res.eta_a_reached,
-            "compaction": res.compaction, "probes": probes, "reference_converged": bool(ok),
-            "stage_times": stages}
+            "n": n, "rate": rate,
+            "compaction": res.compaction, "probes": probes, "comparison": chosen,
+            "probes_dir": os.path.join(ddir, chosen["state"]),
+            "reference_converged": True, "domain_rows": drows, "domain_bounds": bounds,
+            "domain_dir": ddir, "eta_peak": eta_peak, "stage_times": stages,
+            "p3_state": _p3_state(res.rows, eta_peak)}
+
+
+def _p3_state(rows, eta_peak):
+    """The first recorded state with q / ((s1 + 2 s2)/3) >= 1.029, or None."""
+    from .experiment import COLUMNS
+    i = {c: k for k, c in enumerate(COLUMNS)}
+    for r in rows:
+        p3 = (r[i["s1"]] + 2 * r[i["s2"]]) / 3
+        if p3 > 0 and r[i["q"]] / p3 >= ETA_P3:
+            return {"eta": r[i["eta"]], "eta_fraction": r[i["eta"]] / eta_peak,
+                    "eps1": r[i["eps1"]], "eta_p3": r[i["q"]] / p3,
+                    "eta_p3_peak": max(x[i["q"]] / ((x[i["s1"]] + 2 * x[i["s2"]]) / 3)
+                                       for x in rows if x[i["s1"]] + 2 * x[i["s2"]] > 0)}
+    return None
 
 
 # -- conclusions -------------------------------------------------------------------------------
@@ -141,8 +183,9 @@ def _zone_stats(w2, micro, plastic):
     return {"elastic": f(d[~pl]), "plastic": f(d[pl])}
 
 
-def conclusions(h: dict, dem_rows: list | None, fem: dict | None) -> dict:
-    """The paper's section-5 conclusions as numbers, for each model."""
+def conclusions(h: dict, dem_rows: list | None, fem: dict | None, dem: dict | None = None) -> dict:
+    """The paper's section-5 conclusions as numbers, for each model (``dem``: the result of
+    ``dem_part``, for its comparison state, domain and the p = (s1 + 2 s2)/3 reading)."""
     from hmodel.probes import arcs
     sw = h["sweep"]
     c = {"hmodel": {}, "dem": None, "fem": None, "domain": []}
@@ -174,19 +217,24 @@ def conclusions(h: dict, dem_rows: list | None, fem: dict | None) -> dict:
         g = lambda k: np.array([r[k] for r in dem_rows], float)
         a, w2, mic = g("alpha_sigma"), g("w2"), g("w2_micro")
         w2n, w2t, pl = g("w2n"), g("w2t"), g("plastic").astype(bool)
-        conv = g("converged").astype(bool) & g("converged_elastic").astype(bool)
-        # A probe stopped at the step cap has no equilibrium end (the stress increment exceeds
-        # what the sample carries, as in directions of increasing q near the peak): its W2 is
-        # that of a dynamic state, so the W2 statistics use the probes that reached equilibrium.
-        ok = conv
+        oc = np.array([r["outcome"] for r in dem_rows])
+        # Only an equilibrium probe has a W2 (Eq. 15 needs equilibrium at both ends); a
+        # failure ran away (Eq. 1: W2 <= 0 in the limit); an undecided one hit the cap.
+        ok = (oc == "equilibrium") & np.array([r["outcome_elastic"] == "equilibrium"
+                                                for r in dem_rows])
+        fail = oc == "failure"
         ka = np.flatnonzero(ok)
         k = int(ka[np.argmin(w2[ok])])
         negd = ok & (w2 <= 0)
         low = ok & (w2 <= w2[k] + 0.1)            # the low-W2 cone (within 0.1 of the minimum)
         c["dem"] = {
-            "n_probes": int(a.size), "n_not_converged": int((~conv).sum()),
-            "alpha_not_converged": [float(x) for x in a[~conv]],
-            "cone_w2": arcs(a[ok], negd[ok]), "min_w2": float(w2[k]), "alpha_min_w2": float(a[k]),
+            "n_probes": int(a.size), "n_equilibrium": int(ok.sum()), "n_failure": int(fail.sum()),
+            "n_undecided": int((oc == "undecided").sum()),
+            "alpha_failure": [float(x) for x in a[fail]],
+            "alpha_undecided": [float(x) for x in a[~ok & ~fail]],
+            "cone_w2": arcs(a[ok], negd[ok]),
+            "unstable_directions": arcs(a[ok | fail], (negd | fail)[ok | fail]),
+            "min_w2": float(w2[k]), "alpha_min_w2": float(a[k]),
             "min_in_third_quadrant": bool(180.0 <= a[k] <= 270.0),
             "low_w2_cone": arcs(a[ok], low[ok]),
             "plastic_zone": arcs(a, pl),
@@ -196,6 +244,17 @@ def conclusions(h: dict, dem_rows: list | None, fem: dict | None) -> dict:
             "w2t_max_in_plastic_zone": float(w2t[pl & ok].max()) if (pl & ok).any() else None,
             "w2t_at_min_w2": float(w2t[k]), "w2n_at_min_w2": float(w2n[k]),
         }
+        if dem is not None:
+            c["dem"]["state"] = dem["comparison"]
+            c["dem"]["state"]["eta_fraction"] = dem["comparison"]["eta_R"] / dem["eta_peak"]
+            c["dem"]["eta_peak"] = dem["eta_peak"]
+            c["dem_domain"] = {"bounds": dem["domain_bounds"], "rows": dem["domain_rows"]}
+            p3 = dem["p3_state"]
+            c["dem_p3"] = p3
+            if p3 is not None:
+                b = dem["domain_bounds"]
+                p3["below_lower_boundary"] = bool(b["lower_eta"] == b["lower_eta"]
+                                                  and p3["eta"] < b["lower_eta"])
     if fem is not None:
         from hmodel.driver import drained_biaxial, isotropic_state, run_path
         from hmodel.params import HParams
@@ -236,9 +295,26 @@ def _figures(out, h, dem, fem):
     rows = dem["probes"] if dem else None
     # a probe without equilibrium has no W2 (Eq. 15 needs equilibrium at both ends): NaN, so
     # that the curves break there, and the count in the legend
-    conv = lambda k: [float(r[k]) if r["converged"] else np.nan for r in rows]
-    n_failed = sum(1 for r in rows if not r["converged"]) if rows else 0
-    failed_note = f" ({n_failed} without equilibrium not drawn)" if n_failed else ""
+    conv = lambda k: [float(r[k]) if r["outcome"] == "equilibrium" else np.nan for r in rows]
+    outc = np.array([r["outcome"] for r in rows]) if rows else np.array([])
+    a_dem = np.array([r["alpha_sigma"] for r in rows]) if rows else np.array([])
+    failed_note = ""
+    state_note = (f", state {dem['comparison']['state']} (eta {dem['comparison']['eta_R']:.3f})"
+                  if dem else "")
+
+    def outcome_marks(ax, polar_plot=False):
+        """Failures (ran away: W2 <= 0 in the limit) as red triangles on W2 = 0, undecided
+        probes as grey squares on W2 = 0."""
+        for kind, m, col, lab in (("failure", "^", "C3", "DEM failure (runaway)"),
+                                  ("undecided", "s", "0.6", "DEM undecided (cap)")):
+            sel = outc == kind
+            if not sel.any():
+                continue
+            if polar_plot:
+                polar(ax, a_dem[sel], np.zeros(sel.sum()), m, lab)
+                ax.lines[-1].set_color(col)
+            else:
+                ax.plot(a_dem[sel], np.zeros(sel.sum()), m, color=col, label=lab)
 
     def polar(ax, a_deg, w, style, label):
         a = np.radians(np.asarray(a_deg, float))
@@ -251,24 +327,39 @@ def _figures(out, h, dem, fem):
     e = h["path"].eps
     a1.plot(100 * e[:, 0], q / 1e3, label="H-model material point")
     a2.plot(100 * e[:, 0], 100 * (e[:, 0] + e[:, 1]), label="H-model material point")
+    ends = [100 * e[-1, 0]]
+    rA = h["pathA"]
+    eA = 100 * rA.eps[-1, 0]
+    qA = (rA.sigma[-1, 0] - rA.sigma[-1, 1]) / 1e3
+    a1.plot([eA], [qA], "o", color="C0", mfc="none", ms=8, label=f"H-model A (eta {h.get('eta_a', 1.029):g})")
+    a2.plot([eA], [100 * (rA.eps[-1, 0] + rA.eps[-1, 1])], "o", color="C0", mfc="none", ms=8)
     if fem is not None:
         cur = fem["curve"]
         a1.plot(100 * np.asarray(cur["eps1"]), np.asarray(cur["q"]) / 1e3, "--", label=f"FE specimen (n_dir {fem['n_dir']})")
+        ends.append(100 * float(np.asarray(cur["eps1"])[-1]))
         if "eps2_mean" in cur:
             ev = np.asarray(cur["eps1"]) + np.asarray(cur["eps2_mean"])
             a2.plot(100 * np.asarray(cur["eps1"]), 100 * ev, "--", label="FE specimen")
     if dem is not None:
         from .experiment import COLUMNS
         arr = np.array(dem["biaxial_rows"], float)
-        col = {k: arr[:, COLUMNS.index(k)] for k in ("eps1", "eps_v", "q")}
-        a1.plot(100 * col["eps1"], col["q"] / 1e3, label="DEM sample")
-        a2.plot(100 * col["eps1"], 100 * col["eps_v"], label="DEM sample")
-    for ax, yl in ((a1, "deviatoric stress q = s1 - s2 [kPa]"), (a2, "volumetric strain eps_v [%] (contraction > 0)")):
-        ax.set_xlabel("axial strain eps1 [%]")
+        col = {k: arr[:, COLUMNS.index(k)] for k in ("eps1", "eps_v", "q", "eta")}
+        lab = f"DEM sample ({dem.get('n', '?')} disks, {dem.get('rate', '?')}/s)"
+        a1.plot(100 * col["eps1"], col["q"] / 1e3, label=lab, color="C2")
+        a2.plot(100 * col["eps1"], 100 * col["eps_v"], label=lab, color="C2")
+        ends.append(100 * float(col["eps1"][-1]))
+        # the DEM state of the comparison: the first recorded row at its eta
+        k = int(np.argmax(col["eta"] >= dem["comparison"]["eta_R"] - 1e-12))
+        a1.plot([100 * col["eps1"][k]], [col["q"][k] / 1e3], "s", color="C2", mfc="none", ms=8,
+                label=f"DEM comparison state ({dem['comparison']['state']})")
+        a2.plot([100 * col["eps1"][k]], [100 * col["eps_v"][k]], "s", color="C2", mfc="none", ms=8)
+    for ax, yl in ((a1, "deviatoric stress $q = s_1 - s_2$ [kPa]"),
+                   (a2, r"volumetric strain $\varepsilon_v$ [%] (contraction > 0)")):
+        ax.set_xlabel(r"axial strain $\varepsilon_1$ [%]")
         ax.set_ylabel(yl)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-        ax.set_xlim(0, 5)
+        ax.set_xlim(0, min(ends))     # every curve ends at the same strain
     a1.set_title("Drained biaxial test at 200 kPa (Figs. 4 and 13)")
     a2.set_title("Volumetric response (Figs. 5 and 14)")
     figs["stress_strain"] = "fig_stress_strain.png"
@@ -285,9 +376,10 @@ def _figures(out, h, dem, fem):
     axs[0].set_title("H-model at A (Fig. 8)")
     if rows:
         a = [r["alpha_sigma"] for r in rows] + [rows[0]["alpha_sigma"]]
-        polar(axs[1], a, conv("w2") + conv("w2")[:1], "C0o-",
-              f"DEM W2 ({len(rows)} stress probes{failed_note})")
-    axs[1].set_title("DEM at A (Fig. 15)")
+        polar(axs[1], a, np.clip(conv("w2") + conv("w2")[:1], -0.5, 1.1), "C0o-",
+              f"DEM W2 ({len(rows)} stress probes; clipped to [-0.5, 1.1])")
+        outcome_marks(axs[1], polar_plot=True)
+    axs[1].set_title(f"DEM (Fig. 15){state_note}")
     for ax in axs:
         ax.legend(fontsize=8, loc="upper left")
     figs["polar_w2"] = "fig_polar_w2.png"
@@ -304,7 +396,8 @@ def _figures(out, h, dem, fem):
         axs[1].plot(a, conv("w2_micro"), "s--", label="micro: sum df.dl over grain contacts")
         pl = np.array([r["plastic"] for r in rows], bool)
         axs[1].plot(a[pl], np.array(conv("w2"))[pl], "x", color="C3", label="plastic probe")
-    axs[1].set_title("DEM (Fig. 16)")
+        outcome_marks(axs[1])
+    axs[1].set_title(f"DEM (Fig. 16){state_note}")
     for ax in axs:
         _angle_axes(ax)
     figs["micro_macro"] = "fig_micro_macro.png"
@@ -321,7 +414,8 @@ def _figures(out, h, dem, fem):
         axs[1].plot(a, conv("w2n"), "o-", label="W2n (normal)" + failed_note)
         axs[1].plot(a, conv("w2t"), "s-", label="W2t (tangential)")
         axs[1].plot(a, conv("w2"), "k:", lw=0.8, label="W2 macro")
-    axs[1].set_title("DEM (Fig. 17)")
+        outcome_marks(axs[1])
+    axs[1].set_title(f"DEM (Fig. 17){state_note}")
     for ax in axs:
         _angle_axes(ax)
     figs["normal_tangential"] = "fig_normal_tangential.png"
@@ -331,6 +425,13 @@ def _figures(out, h, dem, fem):
         from hmodel.plots import fig_domain
         figs["domain"] = "fig_domain.png"
         fig_domain(h["domain"], os.path.join(out, figs["domain"]))
+    if dem is not None:
+        import shutil
+        for src, key in (("fig_domain.png", "dem_domain"), ("fig_domain_w2.png", "dem_domain_w2")):
+            p = os.path.join(dem["domain_dir"], src)
+            if os.path.exists(p):
+                figs[key] = f"fig_dem_{src[4:]}"
+                shutil.copyfile(p, os.path.join(out, figs[key]))
     return figs
 
 
@@ -355,13 +456,29 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
                  f"orientations: max |q_FE - q_mp| / q_max = {fm['max_rel_q_diff_vs_material_point']:.2e}; "
                  f"FE peak at eps1 = {100 * fm['eps1_peak']:.2f} %.")
     if dm is not None:
-        L.append(f"- DEM sample: see the curve; its A is the state where the directional analysis was run "
-                 f"(eta_A reached: {config.get('dem_eta_a_reached')}).")
-    L += ["", "## Second-order work at A", "", f"![polar W2]({figs['polar_w2']})", "",
+        L.append(f"- DEM sample: peak eta = {dm.get('eta_peak', float('nan')):.4f} (p = (s1 + s2)/2; "
+                 f"eta = 1.029 reached: {config.get('dem_eta_a_reached')}).")
+        st = dm.get("state")
+        if st:
+            L.append(
+                f"- DEM comparison state, by rule: the highest saved state whose reference held at "
+                f"constant stress and whose every probe target stays below the largest stress ratio "
+                f"held by a reference (eta_R + largest probe increment <= max eta_R held, a lower "
+                f"bound of the strength under stress control eta_lim) and the smallest that failed: "
+                f"**{st['state']}**, eta_R = "
+                f"{st['eta_R']:.4f} ({st['eta_fraction']:.3f} of the peak), largest probe increment "
+                f"{st['max_eta_increment']:.4f}, largest eta held {st['eta_held_max']:.4f}"
+                + (f", smallest eta that failed {st['eta_failed_min']:.4f}" if st['eta_failed_min'] else "")
+                + ("" if st["rule_met"] else " (no state met the rule: the lowest held state)") + ".")
+    L += ["", "## Second-order work at A (H-model) and at the comparison state (DEM)", "",
+          f"![polar W2]({figs['polar_w2']})", "",
           f"![micro and macro]({figs['micro_macro']})", "",
           f"![normal and tangential parts]({figs['normal_tangential']})", ""]
     if "domain" in figs:
         L += [f"![bifurcation domain]({figs['domain']})", ""]
+    for key in ("dem_domain", "dem_domain_w2"):
+        if key in figs:
+            L += [f"![DEM bifurcation domain]({figs[key]})", ""]
     L += ["## The paper's conclusions (section 5), as they come out of this run", ""]
     # 1. instability cone
     s = (f"1. **Instability cone in the third quadrant.** H-model: W2 <= 0 for alpha_sigma in "
@@ -369,11 +486,14 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
          f"minimum W2 = {hm['min_w2']:.3f} at {hm['alpha_min_w2']:.1f} deg, inside the plastic zone "
          f"{format_arcs(hm['plastic_zone'])} deg.")
     if dm:
-        nc = dm["alpha_not_converged"]
-        s += (f" DEM ({dm['n_probes']} probes; {len(nc)} reached no equilibrium within the step cap"
-              + (f" (alpha_sigma = {', '.join(f'{x:.0f}' for x in nc)} deg: the sample fails under "
-                 f"these increments) and are left out of the W2 statistics" if nc else "")
-              + f"): W2 <= 0 for {format_arcs(dm['cone_w2']) if dm['cone_w2'] else 'no direction'}; minimum W2 = {dm['min_w2']:.3f} at "
+        fl, und = dm["alpha_failure"], dm["alpha_undecided"]
+        s += (f" DEM ({dm['n_probes']} probes: {dm['n_equilibrium']} equilibrium, {len(fl)} failures"
+              + (f" at alpha_sigma = {', '.join(f'{x:.0f}' for x in fl)} deg (the sample ran away: "
+                 f"W2 <= 0 in the limit, Eq. 1)" if fl else "")
+              + f", {len(und)} undecided"
+              + (f" at {', '.join(f'{x:.0f}' for x in und)} deg" if und else "")
+              + f"): unstable directions (W2 <= 0 or failure) "
+              f"{format_arcs(dm['unstable_directions']) if dm['unstable_directions'] else 'none'}; W2 <= 0 for {format_arcs(dm['cone_w2']) if dm['cone_w2'] else 'no direction'}; minimum W2 = {dm['min_w2']:.3f} at "
               f"{dm['alpha_min_w2']:.0f} deg (third quadrant: {dm['min_in_third_quadrant']}); low-W2 cone "
               f"(within 0.1 of the minimum) {format_arcs(dm['low_w2_cone'])} deg; plastic zone "
               f"{format_arcs(dm['plastic_zone'])} deg.")
@@ -408,6 +528,42 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
         L.append("4. **Bifurcation domain: W2 against W2_sigma.** First direction with W2 <= 0 on the drained "
                  "path, against W2_sigma <= 0: " + "; ".join(parts) + ". The W2_sigma domain is slightly "
                  "larger and the boundary moves little: the geometric terms barely shift it.")
+    dd = c.get("dem_domain")
+    if dd:
+        b = dd["bounds"]
+        hb = b.get("hmodel") or {}
+        s = ("5. **Bifurcation domain of both models at 200 kPa.** DEM: "
+             + (f"the first state with W2 <= 0 or a failure is {b['lower_state']} at eta = "
+                f"{b['lower_eta']:.4f} ({b['lower_eta_fraction']:.3f} of its peak {b['eta_peak']:.4f}; "
+                f"{b['lower_why']})" if b["lower_state"] else "no state with W2 <= 0 or a failure")
+             + f"; strength under stress control eta_lim in [{b['eta_lim_low']:.4f}, "
+             f"{b['eta_lim_high']:.4f}] (largest target held, smallest target failed).")
+        if hb:
+            s += (f" H-model: first W2 <= 0 at eta = {hb['eta_w2']:.4f} ({hb['eta_w2_fraction']:.3f} "
+                  f"of its peak {hb['eta_peak']:.4f}), W2_sigma <= 0 at {hb['eta_w2sigma']:.4f}.")
+        rows = sorted(dd["rows"], key=lambda r: r["eta"])
+        s += " Along the DEM path (eta, fraction, min W2 of equilibrium probes, failures): " + "; ".join(
+            f"{r['eta']:.3f} ({r['eta_fraction']:.2f}): "
+            + ("reference failed" if r["reference"] == "failure" else
+               "not probed" if not r["probed"] else f"{r['min_w2']:.3f}, {r['n_failure']}")
+            for r in rows) + "."
+        L.append(s)
+    p3 = c.get("dem_p3")
+    if dm is not None:
+        if p3:
+            L.append(
+                f"\n**Which eta for the DEM's A.** With p = (s1 + 2 s2)/3 the DEM's peak is "
+                f"{p3['eta_p3_peak']:.3f} and 1.029 is reached at eps1 = {100 * p3['eps1']:.2f} %, "
+                f"eta (p = (s1 + s2)/2) = {p3['eta']:.4f}, {p3['eta_fraction']:.3f} of the peak. "
+                + ("That state lies below the DEM's lower boundary of the bifurcation domain (no "
+                   "W2 <= 0 and no failure there), while the paper finds an instability cone at its "
+                   "DEM A: the data do not favour this reading; they favour a state closer to the "
+                   "peak (the paper's A is 0.995 of the H-model's peak)." if p3.get("below_lower_boundary")
+                   else "That state lies inside the DEM's bifurcation domain, consistent with the "
+                   "paper's cone at its DEM A: the data are consistent with this reading."))
+        else:
+            L.append("\n**Which eta for the DEM's A.** eta = 1.029 with p = (s1 + 2 s2)/3 is not "
+                     "reached either.")
     L += ["", "## Wall times", ""] + [f"- {k}: {v:.1f} s" for k, v in timings.items()] + [""]
     with atomic_open(os.path.join(out, "report.md")) as f:
         f.write("\n".join(L))
@@ -415,12 +571,15 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
 
 def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None, skip_dem=False,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
-                   dem_max_steps=None, threads=None, resume=False):
+                   dem_max_steps=None, threads=None, resume=False, dem_domain=None):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
     ``dem_alphas`` [deg] replaces the 45 probe directions, ``dem_max_steps`` the probe cap;
     ``threads`` and ``resume``: see ``dem_part`` (the H-model and FE parts always rerun).
+    ``dem_domain``: the DEM's directional analysis at every saved state (its bifurcation
+    domain), default on except with ``full`` (there only at the comparison state: the
+    12,000-disk domain is ``python -m dem domain``'s job).
     """
     from hmodel.io import atomic_open
 
@@ -444,14 +603,22 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     if not skip_dem:
         t = time.time()
         _log(f"DEM: {n} disks, rate {rate}/s, 45 probes x 2")
+        hb = None
+        for d in h.get("domain", []):
+            if abs(d.sigma2 - 200e3) < 1.0:
+                peak = d.q_peak / d.p_peak
+                hb = {"sigma2": d.sigma2, "eta_w2": d.q_w2 / d.p_w2,
+                      "eta_w2sigma": d.q_w2sigma / d.p_w2sigma, "eta_peak": peak,
+                      "eta_w2_fraction": d.q_w2 / d.p_w2 / peak}
         dem = dem_part(os.path.join(out_dir, "dem"), n=n, seed=seed, rate=rate, workers=workers,
                        alphas=dem_alphas, max_steps=dem_max_steps, threads=threads,
-                       resume=resume)
+                       resume=resume, domain=(not full) if dem_domain is None else dem_domain,
+                       hmodel_boundary=hb)
         n_runs = 2 * len(dem["probes"])
         timings[f"DEM ({n} disks: compaction, biaxial, {n_runs} probe runs)"] = time.time() - t
         for k, v in dem["stage_times"].items():
             timings[f"  DEM {k}"] = v
-    c = conclusions(h, dem["probes"] if dem else None, fem)
+    c = conclusions(h, dem["probes"] if dem else None, fem, dem)
     figs = _figures(out_dir, h, dem, fem)
     config = {"full": full, "dem_n": n, "dem_seed": seed, "dem_rate": rate,
               "dem_probe_max_steps": dem_max_steps, "fem_mesh": list(fem_mesh),

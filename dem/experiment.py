@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import sys
 import time
 from typing import NamedTuple
@@ -49,10 +50,15 @@ def _progress(msg):
     print(msg, file=sys.stderr, flush=True)
 
 
+SAVE_FRACTIONS = (0.80, 0.85, 0.90, 0.93, 0.95, 0.97)   # of the peak eta: states along the path
+FALLBACK_FRACTION = 0.97   # A when eta never reaches eta_a: first state at 0.97 of the peak eta
+
+
 def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.029,
                 eps_max=0.10, post_peak_strain=0.02, record_strain=1e-4,
                 compaction_friction_deg=0.0, checkpoint_every=50, resume=False,
-                verbose=True, figures=True, vtk=True) -> BiaxialResult:
+                verbose=True, figures=True, vtk=True, save_fractions=SAVE_FRACTIONS,
+                save_etas=()) -> BiaxialResult:
     """Compact, then run the drained biaxial test past the peak.
 
     Writes out_dir/biaxial.csv, out_dir/stateA.npz (first eta >= eta_a; if never reached,
@@ -61,13 +67,25 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     `checkpoint_every` records so that `resume=True` continues an interrupted run.
     rate: axial strain rate [1/s]; confining: lateral stress [Pa]; record_strain: axial
     strain between CSV rows; the test stops at eps_max or post_peak_strain after the peak.
+
+    States along the path (for ``dem domain``): out_dir/states/state_fF.FFF.npz, the first
+    recorded state whose eta reaches F times the peak eta, for F in ``save_fractions``, and
+    state_etaE.EEEE.npz, the first with eta >= E, for E in ``save_etas`` (absolute), listed in
+    out_dir/states/states.csv.  While the test runs, every recorded state that raises the
+    largest eta so far above ``min(save_fractions) - 0.02`` of it is written to
+    out_dir/candidates/ (and is part of the checkpoint), so a resumed run picks the same
+    states as an uninterrupted one; the folder is removed at the end.
     """
     for name, val, ok, rng in (("rate", rate, rate > 0, "rate > 0 [1/s]"),
                                ("confining", confining, confining > 0, "confining > 0 [Pa]"),
                                ("eta_a", eta_a, eta_a > 0, "eta_a > 0"),
                                ("eps_max", eps_max, 0 < eps_max < 0.5, "0 < eps_max < 0.5"),
                                ("record_strain", record_strain, 0 < record_strain < eps_max,
-                                "0 < record_strain < eps_max")):
+                                "0 < record_strain < eps_max"),
+                               ("save_fractions", save_fractions,
+                                all(0 < f <= 1 for f in save_fractions), "0 < fraction <= 1"),
+                               ("save_etas", save_etas, all(e > 0 for e in save_etas),
+                                "eta > 0")):
         if not ok:
             raise ValueError(f"{name}={val!r}; allowed range: {rng}")
     t_start = time.time()
@@ -96,7 +114,9 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
         info.update(eta_a_reached=False, q_max=-1e300, eps_peak=0.0, eta_max=-1e300)
         rows.append(record(sim))
     rec_steps = max(1, int(round(record_strain / (rate * sim.dt))))
-    kept = {}
+    cdir = os.path.join(out_dir, "candidates")
+    keep_from = min(tuple(save_fractions) + (FALLBACK_FRACTION,)) - 0.02
+    cands = info.setdefault("candidates", [])     # [row dict, file name] of the kept states
     last_print = 0.0
     t_loop = time.time()
     step_loop = sim.step
@@ -117,10 +137,18 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
                     io.write_contacts_vtk(os.path.join(out_dir, "contactsA.vtu"), sim)
                 if verbose:
                     _progress(f"[biaxial] point A: eta={eta:.4f} eps1={e1:.5f} -> {a_path}")
-            elif eta > info["eta_max"] and int(eta / 0.005) not in kept:
-                # first crossing of each 0.005-wide eta bin on the way up: fallback A
-                kept[int(eta / 0.005)] = (sim.state(), dict(zip(COLUMNS, row)))
+        if eta > info["eta_max"]:
+            # a new largest eta: the first state at this eta on the way up
+            name = f"step_{sim.step:010d}.npz"
+            io.save_state(os.path.join(cdir, name), sim.state(), meta={"row": dict(zip(COLUMNS, row))})
+            cands.append([dict(zip(COLUMNS, row)), name])
         info["eta_max"] = max(info["eta_max"], eta)
+        # states far below the largest eta so far can no longer be chosen
+        for c in [c for c in cands if c[0]["eta"] < keep_from * info["eta_max"]
+                  and not any(c[0]["eta"] >= e for e in save_etas)]:
+            cands.remove(c)
+            if os.path.exists(os.path.join(cdir, c[1])):
+                os.unlink(os.path.join(cdir, c[1]))
         done = e1 >= eps_max or (e1 >= info["eps_peak"] + post_peak_strain and
                                  q < 0.98 * info["q_max"])
         now = time.time()
@@ -137,24 +165,30 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
             io.write_csv(os.path.join(out_dir, "biaxial.csv"), COLUMNS, rows)
         if done:
             break
+    first = lambda ok: min((c for c in cands if ok(c[0]["eta"])), key=lambda c: c[0]["step"],
+                           default=None)
+    info["states"] = _save_path_states(out_dir, cdir, cands, first, info["eta_max"],
+                                       save_fractions, save_etas)
     if not info["eta_a_reached"]:
-        # "just before the peak": first kept state with eta >= 0.97 eta_max
-        cands = [v for v in kept.values() if v[1]["eta"] >= 0.97 * info["eta_max"]]
-        if cands and not os.path.exists(a_path):
-            st, rowd = min(cands, key=lambda v: v[1]["step"])
-            io.save_state(a_path, st, meta={"A": rowd, "eta_a": eta_a, "eta_a_reached": False})
-            info["A"] = rowd
+        # "just before the peak": the first state with eta >= 0.97 eta_max
+        c = first(lambda e: e >= FALLBACK_FRACTION * info["eta_max"])
+        if c is not None:
+            st, _ = io.load_state(os.path.join(cdir, c[1]))
+            io.save_state(a_path, st, meta={"A": c[0], "eta_a": eta_a, "eta_a_reached": False})
+            info["A"] = c[0]
             if vtk:
                 sa = Simulation(st)
                 io.write_particles_vtk(os.path.join(out_dir, "particlesA.vtu"), sa)
                 io.write_contacts_vtk(os.path.join(out_dir, "contactsA.vtu"), sa)
         if verbose:
-            _progress(f"[biaxial] WARNING: eta never reached {eta_a} (max {info['eta_max']:.4f});"
-                      f" stateA.npz holds the first state with eta >= 0.97 max eta "
-                      f"({info.get('A')})")
+            a_txt = (f"eta = {info['A']['eta']:.4f} at eps1 = {info['A']['eps1']:.5f}"
+                     if info.get("A") else "none")
+            _progress(f"[biaxial] WARNING: eta never reached {eta_a:g} (max "
+                      f"{info['eta_max']:.4f}); stateA.npz holds the first state with eta >= "
+                      f"{FALLBACK_FRACTION:g} max eta: {a_txt}")
     io.write_csv(os.path.join(out_dir, "biaxial.csv"), COLUMNS, rows)
     wall = time.time() - t_start + info.get("wall_time_before", 0.0)
-    summary = {k: v for k, v in info.items() if k != "rows"}
+    summary = {k: v for k, v in info.items() if k not in ("rows", "candidates")}
     summary.update(n=sim.n, rate=rate, confining=confining, eta_a=eta_a, dt=sim.dt,
                    wall_time=wall, params=params.to_dict())
     io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
@@ -163,8 +197,36 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
         plot_biaxial(rows, info.get("A"), out_dir)
     if os.path.exists(ck_path):
         os.unlink(ck_path)
+    if os.path.isdir(cdir):
+        shutil.rmtree(cdir)
     return BiaxialResult(rows, a_path if os.path.exists(a_path) else None,
                          info["eta_a_reached"], info.get("compaction", {}), wall)
+
+
+STATE_COLUMNS = ["file", "target", "fraction_of_peak", "eta", "eps1", "p", "q", "step"]
+
+
+def _save_path_states(out_dir, cdir, cands, first, eta_max, fractions, etas):
+    """Copy the chosen candidates to out_dir/states/ and list them in states.csv."""
+    sdir = os.path.join(out_dir, "states")
+    listed = []
+    for kind, vals in (("f", fractions), ("eta", etas)):
+        for v in vals:
+            goal = v * eta_max if kind == "f" else v
+            c = first(lambda e: e >= goal)
+            if c is None:
+                continue
+            name = f"state_{kind}{v:.3f}.npz" if kind == "f" else f"state_eta{v:.4f}.npz"
+            st, _ = io.load_state(os.path.join(cdir, c[1]))
+            row = c[0]
+            io.save_state(os.path.join(sdir, name), st, meta={
+                "row": row, "target": f"{v:g} of the peak eta" if kind == "f" else f"eta {v:g}",
+                "fraction_of_peak": row["eta"] / eta_max, "eta_peak": eta_max})
+            listed.append([name, f"{kind}={v:g}", row["eta"] / eta_max, row["eta"], row["eps1"],
+                           row["p"], row["q"], row["step"]])
+    if listed:
+        io.write_csv(os.path.join(sdir, "states.csv"), STATE_COLUMNS, listed)
+    return [dict(zip(STATE_COLUMNS, r)) for r in listed]
 
 
 def plot_biaxial(rows, a_row, out_dir):

@@ -28,6 +28,12 @@ FORMAT = "dem-state"
 FORMAT_VERSION = 1
 
 
+def _umask():
+    m = os.umask(0)
+    os.umask(m)
+    return m
+
+
 def atomic_write_bytes(path, data: bytes):
     path = os.fspath(path)
     d = os.path.dirname(os.path.abspath(path))
@@ -38,6 +44,7 @@ def atomic_write_bytes(path, data: bytes):
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())     # mkstemp makes 0600; an output file is 0644
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -70,8 +77,10 @@ _KEYS = ["format", "format_version", "params", "x", "v", "w", "theta", "r", "wal
 
 
 def load_state(path) -> tuple[State, dict]:
-    """Read a state file.  ValueError if it is truncated, not a DEM state, or of another
-    format version (allowed: FORMAT_VERSION)."""
+    """Read a state file.  ValueError if it is missing, truncated, not a DEM state, or of
+    another format version (allowed: FORMAT_VERSION)."""
+    if not os.path.isfile(path):
+        raise ValueError(f"state file {path}: no such file")
     try:
         with np.load(path, allow_pickle=False) as z:
             missing = [k for k in _KEYS if k not in z.files]
@@ -144,6 +153,7 @@ def _atomic_meshio(path, mesh):
     os.close(fd)
     try:
         meshio.write(tmp, mesh, file_format="vtu")
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

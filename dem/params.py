@@ -123,5 +123,14 @@ class DemParams:
 
     @classmethod
     def from_dict(cls, d: dict) -> "DemParams":
+        """The parameters of a state or parameter file: every field, nothing else (ValueError
+        naming the unknown or missing keys; no default is filled in silently)."""
         names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in names})
+        unknown, missing = sorted(set(d) - names), sorted(names - set(d))
+        if unknown or missing:
+            raise ValueError("DEM parameters: "
+                             + (f"unknown keys {unknown}" if unknown else "")
+                             + ("; " if unknown and missing else "")
+                             + (f"missing keys {missing}" if missing else "")
+                             + f"; allowed: exactly {sorted(names)}")
+        return cls(**d)

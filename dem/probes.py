@@ -27,34 +27,49 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .sample import equilibrate
+from .settle import HISTORY_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
+from .threads import ThreadChooser
 from .walls import stress_path
+
+
+RELAX_FAIL_STRAIN = 0.01   # a relaxation that moves the walls by 1 % strain has run away
 
 
 class ProbeOptions(NamedTuple):
     norm: float = 2500.0            # |ds| [Pa]
     ramp_steps: int = 5000          # stress ramp length [steps]
-    unbalanced_tol: float = 1e-4    # equilibrium: unbalanced-force ratio below this
+    unbalanced_tol: float = 1e-4    # equilibrium (dem.settle): unbalanced-force ratio below this
     stress_tol: float = 25.0        # and wall stresses within this of the target [Pa]
-    max_steps: int = 400_000        # iteration cap (reported in the CSV, never silent)
+    max_steps: int = 400_000        # cap of a probe run: undecided when reached
     relax_max_steps: int = 2_000_000  # cap of the relaxation of A into the reference R
-    check_every: int = 1000         # equilibrium check interval [steps]
+    check_every: int = 1000         # check interval [steps]
     plastic_tol: float = 0.05       # plastic if |de_p| > plastic_tol * |de_elastic|
+    strain_tol: float = 0.01        # equilibrium: strain drift over the window / |de|
+    ke_tol: float = 1e-10           # equilibrium: backbone kinetic energy per disk [J]
+    window: int = 20_000            # equilibrium window at 1000 disks [steps] (scaled with sqrt n)
+    runaway_ratio: float = 100.0    # failure: |de|/|de_el| beyond this with the stresses lost
+    fail_ratio: float = 1000.0      # failure: |de|/|de_el| beyond this
 
     def validate(self):
         checks = (("norm", self.norm > 0, "norm > 0 [Pa]"),
                   ("ramp_steps", self.ramp_steps >= 0, "ramp_steps >= 0"),
-                  ("unbalanced_tol", 0 < self.unbalanced_tol < 1, "0 < unbalanced_tol < 1"),
                   ("stress_tol", 0 < self.stress_tol < self.norm, "0 < stress_tol < norm [Pa]"),
-                  ("max_steps", self.max_steps > 0, "max_steps > 0"),
                   ("relax_max_steps", self.relax_max_steps > 0, "relax_max_steps > 0"),
-                  ("check_every", self.check_every > 0, "check_every > 0"),
                   ("plastic_tol", self.plastic_tol > 0, "plastic_tol > 0"))
         for name, ok, rng in checks:
-            if not ok:
-                raise ValueError(f"{name}={getattr(self, name)!r}; allowed range: {rng}")
+            val = getattr(self, name)
+            if not ok or (isinstance(val, float) and not math.isfinite(val)):
+                raise ValueError(f"{name}={val!r}; allowed range: {rng}")
+        self.rule().validate()
         return self
+
+    def rule(self, max_steps=None) -> SettleRule:
+        """The equilibrium / failure rule of a probe run (or, with ``max_steps``, of the
+        relaxation)."""
+        return SettleRule(self.unbalanced_tol, self.stress_tol, self.strain_tol, self.ke_tol,
+                          self.window, self.check_every, self.runaway_ratio, self.fail_ratio,
+                          self.max_steps if max_steps is None else max_steps)
 
 
 def directions(step_q3=5.0, step_other=10.0):
@@ -75,24 +90,72 @@ def _axes(sim):
     return snap, np.array([sy, sx]), sim.size[::-1].copy()
 
 
-def prepare_reference(state: State, opts: ProbeOptions = ProbeOptions(), verbose=False):
-    """Relax `state` under stress control at its own wall stresses.  Returns
-    (State R, converged, steps, unbalanced)."""
+def prepare_reference(state: State, opts: ProbeOptions = ProbeOptions(), verbose=False,
+                      threads=None):
+    """Relax `state` under stress control at its own wall stresses, by the probes' own rule
+    (``dem.settle``: the drift over the window measured against the elastic strain of a
+    probe, ``voigt_strain``), capped at ``opts.relax_max_steps``.  Returns (State R,
+    Settled): ``Settled.outcome`` is ``failure`` when the state cannot be held at constant
+    stress (above the sample's eta_lim).  ``threads``: None = the default choice."""
     sim = Simulation(state)
+    if threads is not None:
+        sim.threads = ThreadChooser(sim.n, threads)
     sim.cap_on = True
     s = sim.wall_stress()
     sim.set_control(stress_path(s, s, sim.step, 0))
     last = [time.time()]
 
-    def progress(steps, s_now, ub):
+    def progress(steps, row):
         if verbose and time.time() - last[0] > 5.0:
             last[0] = time.time()
-            print(f"[probes] relaxing A: step {steps} unbalanced={ub:.2e} "
-                  f"s=({s_now[0]:.6g}, {s_now[1]:.6g}) Pa", file=sys.stderr, flush=True)
+            print(f"[probes] relaxing the reference: step {steps} unbalanced={row[3]:.2e} "
+                  f"drift ratio={row[9]:.3g} backbone KE={row[2]:.2e} J",
+                  file=sys.stderr, flush=True)
 
-    ok, steps, ub, _ = equilibrate(sim, s, opts.stress_tol, opts.unbalanced_tol,
-                                   opts.relax_max_steps, opts.check_every, progress=progress)
-    return sim.state(), ok, steps, ub
+    # A state taken from a strain-controlled test creeps before it settles, with slips that
+    # keep the servo off target for long stretches (12,000 disks: 0.27 % of axial strain at
+    # eta 0.90, kPa of stress error), so the probes' runaway rules, scaled on a probe's elastic
+    # strain, do not apply.  A relaxation fails when it has moved by RELAX_FAIL_STRAIN: states
+    # above the limit reach tens of percent (60-70 % after 2M steps at 1000 disks).
+    rule = opts.rule(opts.relax_max_steps)._replace(fail_ratio=math.inf, runaway_ratio=math.inf,
+                                                    fail_strain=RELAX_FAIL_STRAIN)
+    res = settle(sim, s, rule, strain_scale=voigt_strain(sim, opts.norm), progress=progress)
+    return sim.state(), res
+
+
+def reference_state(state: State, out_dir, opts: ProbeOptions = ProbeOptions(), relax=True,
+                    resume=False, verbose=True, threads=None):
+    """The probes' reference R in ``out_dir/stateR.npz``: ``state`` relaxed by
+    ``prepare_reference`` (or, ``relax=False``, as it is), kept on ``resume`` when it belongs
+    to ``state`` (same fingerprint of the relaxed state's origin) and was decided, relaxed
+    further when its earlier relaxation hit the cap.  Returns (State R, outcome)."""
+    from . import io
+    path = os.path.join(out_dir, "stateR.npz")
+    origin = state_fingerprint(state)
+    if not relax:
+        return state, "not relaxed"
+    start = state
+    if resume and os.path.exists(path):
+        R, meta = io.load_state(path)
+        if meta.get("origin") != origin:
+            raise ValueError(f"{path} was relaxed from another state; remove it or choose "
+                             "another output directory")
+        if meta.get("outcome") in ("equilibrium", "failure"):
+            if verbose:
+                print(f"[probes] reference taken from {path} ({meta.get('outcome')})",
+                      file=sys.stderr, flush=True)
+            return R, meta["outcome"]
+        start = R           # an earlier relaxation hit its cap: go on from where it stopped
+    R, res = prepare_reference(start, opts, verbose=verbose, threads=threads)
+    if verbose:
+        print(f"[probes] reference: {res.outcome} after {res.steps} steps (unbalanced "
+              f"{res.unbalanced:.2e}, drift ratio {res.strain_ratio:.3g})", file=sys.stderr,
+              flush=True)
+    io.write_csv(os.path.join(out_dir, "reference_history.csv"), HISTORY_COLUMNS, res.history)
+    io.save_state(path, R, meta={"origin": origin, "outcome": res.outcome, "steps": res.steps,
+                                 "unbalanced": res.unbalanced, "creep_rate": res.creep_rate,
+                                 "converged": res.outcome == "equilibrium"})
+    return R, res.outcome
 
 
 def _contacts(snap, x):
@@ -103,29 +166,33 @@ def _contacts(snap, x):
 
 
 def run_probe(state: State, alpha_deg: float, sliding: bool, opts: ProbeOptions = ProbeOptions(),
-              threads: int | None = 1) -> dict:
-    """One stress probe from `state` (should be an equilibrium state).  See module doc."""
-    if threads is not None:
-        import numba
-        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+              threads: int | None = 1, de_elastic: float | None = None) -> dict:
+    """One stress probe from `state` (an equilibrium state), decided by ``dem.settle``.
+    ``de_elastic``: |de| of the elastic probe of this direction (its failure rules use it;
+    without it the strain ratio is taken against ``voigt_strain``).  See the module doc."""
     sim = Simulation(state)
+    if threads is not None:
+        sim.threads = ThreadChooser(sim.n, threads)
     sim.cap_on = bool(sliding)
     snap0, s0, len0 = _axes(sim)
     x0 = sim.x.copy()
     walls0 = sim.walls.copy()
     vol0 = sim.volume
+    ke0 = sim.kinetic_energy()
     from . import kernels
     fnet0 = kernels.net_forces(sim.n, sim.x, snap0.ci, snap0.cj, snap0.fx, snap0.fy,
                                snap0.wp, snap0.ww, snap0.wf)
     a = math.radians(alpha_deg)
     ds = opts.norm * np.array([math.sin(a), math.cos(a)])  # (ds1, ds2)
     target = s0 + ds
+    eps0 = sim.strain()[::-1].copy()
+    scale = voigt_strain(sim, opts.norm)
     # control is in (x, y) order
     sim.set_control(stress_path((s0[1], s0[0]), (target[1], target[0]), sim.step,
                                 opts.ramp_steps))
     sim.run(opts.ramp_steps)
-    ok, steps, ub, _ = equilibrate(sim, (target[1], target[0]), opts.stress_tol,
-                                   opts.unbalanced_tol, opts.max_steps, opts.check_every)
+    st = settle(sim, (target[1], target[0]), opts.rule(), eps0=eps0, de_elastic=de_elastic,
+                strain_scale=scale)
     snap1, s1, len1 = _axes(sim)
     dsig = s1 - s0
     deps = (len0 - len1) / len0
@@ -162,21 +229,30 @@ def run_probe(state: State, alpha_deg: float, sliding: bool, opts: ProbeOptions 
                ds1=dsig[0], ds2=dsig[1], de1=deps[0], de2=deps[1],
                w2=float(dsig @ deps / (nds * nde)) if nds * nde > 0 else float("nan"),
                w2_micro=w2c / norm, w2n=w2n / norm, w2t=w2t / norm, w2_walls=w2w / norm,
-               w2_unbalanced=w2u / norm, converged=bool(ok), steps=int(steps + opts.ramp_steps),
-               unbalanced=float(ub), n_contacts_R=len(c0), n_contacts_end=len(c1),
-               n_created=len(set(c1) - set(c0)), n_lost=len(set(c0) - set(c1)))
+               w2_unbalanced=w2u / norm, outcome=st.outcome,
+               converged=st.outcome == "equilibrium", steps=int(st.steps + opts.ramp_steps),
+               unbalanced=float(st.unbalanced), ke_peak=st.ke_peak_backbone,
+               strain_ratio=st.strain_ratio, creep_rate=st.creep_rate,
+               # Eq. 1 over the probe: the external second-order work V ds.de [J] against
+               # the change of kinetic energy [J] (a failure turns the first into the second)
+               d2_work=float(vol0 * (dsig @ deps)), d_kinetic_energy=sim.kinetic_energy() - ke0,
+               n_contacts_R=len(c0), n_contacts_end=len(c1),
+               n_created=len(set(c1) - set(c0)), n_lost=len(set(c0) - set(c1)),
+               history=st.history.tolist())
     return res
 
 
-COLUMNS = ["alpha_sigma", "w2", "w2_micro", "w2n", "w2t", "w2_unbalanced", "w2_walls", "plastic",
-           "ds1", "ds2", "de1", "de2", "de1_elastic", "de2_elastic", "de_plastic_ratio",
-           "w2_elastic", "converged", "converged_elastic", "steps", "steps_elastic",
+COLUMNS = ["alpha_sigma", "outcome", "w2", "w2_micro", "w2n", "w2t", "w2_unbalanced", "w2_walls",
+           "plastic", "ds1", "ds2", "de1", "de2", "de1_elastic", "de2_elastic", "de_plastic_ratio",
+           "w2_elastic", "strain_ratio", "ke_peak", "creep_rate", "d2_work", "d_kinetic_energy",
+           "outcome_elastic", "converged", "converged_elastic", "steps", "steps_elastic",
            "unbalanced", "n_contacts_R", "n_created", "n_lost"]
+HISTORY_FILE_COLUMNS = ["alpha_sigma", "sliding"] + HISTORY_COLUMNS
 
 
 def _task(args):
-    state, alpha, sliding, opts = args
-    return run_probe(state, alpha, sliding, opts, threads=1)
+    state, alpha, sliding, opts, de_el = args
+    return run_probe(state, alpha, sliding, opts, threads=1, de_elastic=de_el)
 
 
 def state_fingerprint(state: State) -> str:
@@ -224,79 +300,110 @@ def read_checkpoint(path, state: State, opts: ProbeOptions) -> dict:
 
 def run_probes(state: State, alphas, opts: ProbeOptions = ProbeOptions(), workers=None,
                scheduler=None, verbose=True, checkpoint=None):
-    """Run every direction twice (sliding allowed / prevented); returns rows (dicts with
-    COLUMNS).  Spread over local processes (ProcessPoolExecutor, `workers`) or over a
-    dask.distributed cluster at address `scheduler`.  Each probe runs single-threaded and
-    the kernels do not depend on the thread count, so results do not depend on placement.
+    """Run every direction twice, sliding prevented first (its strain is the elastic scale
+    of the sliding run's failure rules, ``dem.settle``), then sliding allowed; returns rows
+    (dicts with COLUMNS, and the check histories under ``history`` / ``history_elastic``).
+    Spread over local processes (ProcessPoolExecutor, `workers`) or over a dask.distributed
+    cluster at address `scheduler`.  Each probe runs single-threaded and the kernels do not
+    depend on the thread count, so results do not depend on placement.
 
     ``checkpoint``: path of a JSON-lines file; every finished run is appended to it (and
     flushed to disk) as it comes in, and runs already there for the same state and options
     are not run again, so an interrupted sweep resumes where it stopped.
     """
-    opts.validate()
-    tasks = [(state, a, s, opts) for a in alphas for s in (True, False)]
-    t0 = time.time()
-    out = []
-    sink = None
-    if checkpoint:
-        done = read_checkpoint(checkpoint, state, opts)
-        keep = [done[(float(a) % 360.0, s)] for _, a, s, _ in tasks
-                if (float(a) % 360.0, s) in done]
-        # rewrite the file whole (atomic), so that appends never follow a torn line
-        from .io import atomic_write_bytes
-        lines = [json.dumps(_checkpoint_header(state, opts))] + [json.dumps(r) for r in keep]
-        atomic_write_bytes(checkpoint, ("\n".join(lines) + "\n").encode())
-        out.extend(keep)
-        tasks = [t for t in tasks if (float(t[1]) % 360.0, t[2]) not in done]
-        if keep and verbose:
-            print(f"[probes] {len(keep)} runs taken from {checkpoint}, {len(tasks)} to run",
-                  file=sys.stderr, flush=True)
-        sink = open(checkpoint, "a")
-    total = len(out) + len(tasks)
+    return run_probe_sets([(state, alphas, checkpoint)], opts, workers, scheduler, verbose)[0]
 
-    def collect(r):
-        out.append(r)
-        if sink is not None:
-            sink.write(json.dumps(r) + "\n")
-            sink.flush()
-            os.fsync(sink.fileno())
-        _report(out, total, t0, verbose)
+
+def run_probe_sets(sets, opts: ProbeOptions = ProbeOptions(), workers=None, scheduler=None,
+                   verbose=True):
+    """``run_probes`` of several states as one pool of independent runs: ``sets`` is a list of
+    (state, alphas, checkpoint or None); returns one list of rows per set."""
+    opts.validate()
+    key = lambda a, s: (float(a) % 360.0, bool(s))
+    t0 = time.time()
+    outs, sinks, alist = [], [], []
+    total = 0
+    for state, alphas, checkpoint in sets:
+        alphas = [float(a) for a in alphas]
+        alist.append(alphas)
+        total += 2 * len(alphas)
+        out = {}
+        if checkpoint:
+            done = read_checkpoint(checkpoint, state, opts)
+            keep = {key(a, s): done[key(a, s)] for a in alphas for s in (False, True)
+                    if key(a, s) in done}
+            # rewrite the file whole (atomic), so that appends never follow a torn line
+            from .io import atomic_write_bytes
+            lines = [json.dumps(_checkpoint_header(state, opts))] + [json.dumps(r) for r in keep.values()]
+            atomic_write_bytes(checkpoint, ("\n".join(lines) + "\n").encode())
+            out.update(keep)
+            if keep and verbose:
+                print(f"[probes] {len(keep)} runs taken from {checkpoint}, "
+                      f"{2 * len(alphas) - len(keep)} to run", file=sys.stderr, flush=True)
+        outs.append(out)
+        sinks.append(open(checkpoint, "a") if checkpoint else None)
+    count = [sum(len(o) for o in outs)]
+
+    def collect(k, r):
+        outs[k][key(r["alpha_sigma"], r["sliding"])] = r
+        if sinks[k] is not None:
+            sinks[k].write(json.dumps(r) + "\n")
+            sinks[k].flush()
+            os.fsync(sinks[k].fileno())
+        count[0] += 1
+        _report(r, count[0], total, t0, verbose)
 
     try:
-        if not tasks:
-            pass
-        elif scheduler:
-            try:
-                from dask.distributed import Client, as_completed
-            except ImportError as e:
-                raise RuntimeError("--scheduler needs dask.distributed (pip install "
-                                   "'granular-w2[distributed]')") from e
-            with Client(scheduler) as client:
-                futs = client.map(_task, tasks, pure=False)
-                for fut in as_completed(futs):
-                    collect(fut.result())
-        elif workers == 1:
-            for t in tasks:
-                collect(_task(t))
-        else:
-            # spawn, not fork: numba's OpenMP threading layer must not be forked
-            import multiprocessing
-            with ProcessPoolExecutor(max_workers=workers or os.cpu_count(),
-                                     mp_context=multiprocessing.get_context("spawn")) as ex:
-                for r in ex.map(_task, tasks):
-                    collect(r)
+        # phase 1: elastic runs; phase 2: sliding runs with their elastic strain
+        _map([(k, (st, a, False, opts, None)) for k, (st, _, _) in enumerate(sets)
+              for a in alist[k] if key(a, False) not in outs[k]], collect, workers, scheduler)
+        de_el = lambda k, a: float(np.hypot(outs[k][key(a, False)]["de1"],
+                                            outs[k][key(a, False)]["de2"]))
+        _map([(k, (st, a, True, opts, de_el(k, a))) for k, (st, _, _) in enumerate(sets)
+              for a in alist[k] if key(a, True) not in outs[k]], collect, workers, scheduler)
     finally:
-        if sink is not None:
-            sink.close()
-    return combine(out, opts)
+        for f in sinks:
+            if f is not None:
+                f.close()
+    return [combine(list(o.values()), opts) for o in outs]
 
 
-def _report(out, total, t0, verbose):
+def _map(tasks, collect, workers, scheduler, fn=None):
+    """Run ``fn`` (default ``_task``) over the (tag, args) ``tasks`` locally or on dask;
+    ``collect(tag, result)`` each result as it comes."""
+    fn = fn or _task
+    if not tasks:
+        return
+    tags = [t for t, _ in tasks]
+    args = [a for _, a in tasks]
+    if scheduler:
+        try:
+            from dask.distributed import Client, as_completed
+        except ImportError as e:
+            raise RuntimeError("--scheduler needs dask.distributed (pip install "
+                               "'granular-w2[distributed]')") from e
+        with Client(scheduler) as client:
+            futs = client.map(fn, args, pure=False)
+            where = {f.key: tag for f, tag in zip(futs, tags)}
+            for fut in as_completed(futs):
+                collect(where[fut.key], fut.result())
+    elif workers == 1 or len(tasks) == 1:
+        for tag, a in tasks:
+            collect(tag, fn(a))
+    else:
+        # spawn, not fork: numba's OpenMP threading layer must not be forked
+        import multiprocessing
+        with ProcessPoolExecutor(max_workers=min(workers or os.cpu_count(), len(tasks)),
+                                 mp_context=multiprocessing.get_context("spawn")) as ex:
+            for tag, r in zip(tags, ex.map(fn, args)):
+                collect(tag, r)
+
+
+def _report(r, k, total, t0, verbose):
     if verbose:
-        r = out[-1]
-        print(f"[probes] {len(out)}/{total} alpha={r['alpha_sigma']:.0f} "
-              f"sliding={r['sliding']} w2={r['w2']:.3f} micro={r['w2_micro']:.3f} "
-              f"converged={r['converged']} steps={r['steps']} ({time.time() - t0:.0f} s)",
+        print(f"[probes] {k}/{total} alpha={r['alpha_sigma']:.0f} "
+              f"sliding={r['sliding']} {r['outcome']} w2={r['w2']:.3f} micro={r['w2_micro']:.3f} "
+              f"|de|/|de_el|={r['strain_ratio']:.3g} steps={r['steps']} ({time.time() - t0:.0f} s)",
               file=sys.stderr, flush=True)
 
 
@@ -311,52 +418,106 @@ def combine(results, opts: ProbeOptions):
         de = np.array([t["de1"], t["de2"]])
         dee = np.array([e["de1"], e["de2"]])
         ratio = float(np.linalg.norm(de - dee) / np.linalg.norm(dee))
-        row = {k: t[k] for k in ("alpha_sigma", "w2", "w2_micro", "w2n", "w2t", "w2_unbalanced",
-                                 "w2_walls", "ds1", "ds2", "de1", "de2", "converged", "steps",
-                                 "unbalanced", "n_contacts_R", "n_created", "n_lost")}
+        row = {k: t[k] for k in ("alpha_sigma", "outcome", "w2", "w2_micro", "w2n", "w2t",
+                                 "w2_unbalanced", "w2_walls", "ds1", "ds2", "de1", "de2",
+                                 "strain_ratio", "ke_peak", "creep_rate", "d2_work",
+                                 "d_kinetic_energy", "converged", "steps", "unbalanced",
+                                 "n_contacts_R", "n_created", "n_lost", "history")}
         row.update(plastic=int(ratio > opts.plastic_tol), de1_elastic=e["de1"],
                    de2_elastic=e["de2"], de_plastic_ratio=ratio, w2_elastic=e["w2"],
-                   converged_elastic=e["converged"], steps_elastic=e["steps"])
+                   outcome_elastic=e["outcome"], converged_elastic=e["converged"],
+                   steps_elastic=e["steps"], history_elastic=e["history"])
         rows.append(row)
     return rows
 
 
-def plot_probes(rows, out_dir):
+def csv_rows(rows):
+    """``rows`` as lists in COLUMNS order (booleans as 0/1) for ``io.write_csv``."""
+    return [[int(r[c]) if isinstance(r[c], bool) else r[c] for c in COLUMNS] for r in rows]
+
+
+def history_rows(rows):
+    """Every check of every run, for ``probe_histories.csv`` (HISTORY_FILE_COLUMNS)."""
+    out = []
+    for r in rows:
+        for sliding, key in ((1, "history"), (0, "history_elastic")):
+            out += [[r["alpha_sigma"], sliding] + list(h) for h in r[key]]
+    return out
+
+
+def write_probe_files(rows, out_dir, note=""):
+    """probes.csv, probe_histories.csv and Figs. 15-17 of ``rows`` in ``out_dir``."""
+    from . import io
+    io.write_csv(os.path.join(out_dir, "probes.csv"), COLUMNS, csv_rows(rows))
+    io.write_csv(os.path.join(out_dir, "probe_histories.csv"), HISTORY_FILE_COLUMNS,
+                 history_rows(rows))
+    plot_probes(rows, out_dir, note)
+
+
+RMAX = 2.0   # polar radius of the outer ring: 0.5 + W2 is drawn in [0, RMAX]
+
+
+def polar_radius(w2):
+    """Radius 0.5 + W2 of the polar diagrams, clipped to [0, RMAX] (so matplotlib never moves
+    the origin); returns (radius, clipped mask).  Clipped points get their own marker."""
+    r = 0.5 + np.asarray(w2, float)
+    clipped = np.isfinite(r) & ((r < 0) | (r > RMAX))
+    return np.clip(r, 0.0, RMAX), clipped
+
+
+def plot_probes(rows, out_dir, note=""):
     """Figs. 15 (W2 polar), 16 (macro vs micro), 17 (normal/tangential parts) as PNG.
-    Polar radius 0.5 + W2 (the circle r = 0.5 is W2 = 0), angle alpha_sigma.  Probes that
-    reached no equilibrium (iteration cap) have no meaningful W2 (both ends must be
-    equilibrium states): they are left out of the curves and named under the figure."""
+    Polar radius 0.5 + W2 (the dashed circle is W2 = 0), angle alpha_sigma, clipped to
+    [0, RMAX] with clipped points marked.  Only equilibrium probes have a W2 (Eq. 15 needs
+    equilibrium at both ends) and are joined by the curves; failures (the sample ran away:
+    W2 <= 0 in the limit, Eq. 1) are red triangles on the W2 = 0 circle; undecided probes are
+    grey dots at their last W2.  ``note``: sample, pressure and rate for the title."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    failed = [r["alpha_sigma"] for r in rows if not r["converged"]]
-    figs = (("fig15_w2.png", [("w2", "W2 macro")], "Normalized second-order work W2"),
-            ("fig16_w2_micro.png", [("w2", "W2 macro"), ("w2_micro", "sum df.dl / (V|ds||de|)")],
+    figs = (("fig15_w2.png", [("w2", r"$W_2$ macro")], r"Normalized second-order work $W_2$"),
+            ("fig16_w2_micro.png", [("w2", r"$W_2$ macro"),
+                                    ("w2_micro", r"micro $\sum d\mathbf{f}\cdot d\mathbf{l}\,/\,(V|d\sigma||d\varepsilon|)$")],
              "Macro vs micro second-order work"),
-            ("fig17_w2_nt.png", [("w2n", "W2 normal part"), ("w2t", "W2 tangential part")],
-             "Normal and tangential parts of the micro W2"))
+            ("fig17_w2_nt.png", [("w2n", r"$W_2^n$ (normal)"), ("w2t", r"$W_2^t$ (tangential)")],
+             "Normal and tangential parts of the micro $W_2$"))
     th = np.linspace(0, 2 * np.pi, 200)
+    outc = np.array([r["outcome"] for r in rows])
+    a_all = np.radians([r["alpha_sigma"] for r in rows])
+    eq = outc == "equilibrium"
     # closed loop over every direction; NaN where no equilibrium, so the curve breaks there
-    loop = list(rows) + list(rows[:1])
-    a = np.radians([r["alpha_sigma"] for r in loop])
-    get = lambda k: np.array([float(r[k]) if r["converged"] else np.nan for r in loop])
+    loop = np.append(np.arange(len(rows)), 0) if rows else np.array([], int)
     for name, series, title in figs:
-        fig = plt.figure(figsize=(5.5, 5.5))
+        fig = plt.figure(figsize=(6, 6.4))
         ax = fig.add_subplot(projection="polar")
-        ax.plot(th, np.full_like(th, 0.5), "--", color="gray", lw=0.8, label="W2 = 0")
-        for k, lab in series:
-            ax.plot(a, 0.5 + get(k), "o-", ms=3, lw=1, label=lab)
-        pl = np.array([bool(r["plastic"]) and r["converged"] for r in rows], bool)
+        ax.set_ylim(0, RMAX)
+        ax.set_yticks([0.5, 1.0, 1.5, 2.0])
+        ax.set_yticklabels(["0", "0.5", "1", "1.5"], fontsize=7)   # ticks read as W2
+        ax.plot(th, np.full_like(th, 0.5), "--", color="gray", lw=0.8, label=r"$W_2 = 0$")
+        for j, (k, lab) in enumerate(series):
+            w = np.array([float(r[k]) for r in rows])
+            rad, clip = polar_radius(np.where(eq, w, np.nan))
+            ax.plot(a_all[loop], rad[loop], "o-", ms=3, lw=1, color=f"C{j}", label=lab)
+            if clip.any():
+                ax.plot(a_all[clip], rad[clip], "D", mfc="none", color=f"C{j}", ms=6,
+                        label=f"clipped to [{-0.5:g}, {RMAX - 0.5:g}]" if j == 0 else None)
+            und = outc == "undecided"
+            if und.any():
+                ax.plot(a_all[und], polar_radius(w[und])[0], "o", color="0.6", ms=4,
+                        label="undecided (at the cap)" if j == 0 else None)
+        pl = np.array([bool(r["plastic"]) for r in rows], bool) & eq
         if name == "fig15_w2.png" and pl.any():
-            ax.plot(a[:-1][pl], 0.5 + get("w2")[:-1][pl], "x", color="C3", label="plastic")
-        ax.set_title(f"{title}\nangle: alpha_sigma (tan = ds1/ds2), radius: 0.5 + W2 [-]",
+            w = np.array([float(r["w2"]) for r in rows])
+            ax.plot(a_all[pl], polar_radius(w[pl])[0], "x", color="C3", label="plastic")
+        fail = outc == "failure"
+        if fail.any():
+            ax.plot(a_all[fail], np.full(fail.sum(), 0.5), "^", color="C3", ms=7,
+                    label=r"failure (runaway: $W_2 \leq 0$)")
+        ax.set_title(f"{title}{' - ' + note if note else ''}\nangle: $\\alpha_\\sigma$ "
+                     r"($\tan\alpha_\sigma = d\sigma_1/d\sigma_2$), radius: $0.5 + W_2$",
                      fontsize=9)
-        ax.legend(loc="lower left", fontsize=7, bbox_to_anchor=(-0.1, -0.15))
-        if failed:
-            fig.text(0.99, 0.01, f"no equilibrium (not drawn): {len(failed)} probes,\n"
-                     f"alpha_sigma = {', '.join(f'{v:g}' for v in failed)} deg",
-                     ha="right", va="bottom", fontsize=6, wrap=True)
-        fig.tight_layout()
+        fig.legend(loc="lower center", ncol=3, fontsize=7, frameon=False)
+        fig.tight_layout(rect=(0, 0.1, 1, 1))
         tmp = os.path.join(out_dir, ".tmp-" + name)
         fig.savefig(tmp, dpi=120, format="png")
         plt.close(fig)

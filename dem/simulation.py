@@ -7,6 +7,7 @@ the neighbour-list reference positions, the step counter and the control.
 from __future__ import annotations
 
 import math
+import time
 from typing import NamedTuple
 
 import numba
@@ -15,6 +16,7 @@ import numpy as np
 from . import kernels
 from .neighbours import build_pair_list, finish_pair_list
 from .params import DemParams
+from .threads import ThreadChooser
 from .walls import Control, wall_stress
 
 
@@ -85,8 +87,10 @@ class Simulation:
                                       c(state.pi, np.int32), c(state.pj, np.int32), c(state.ft))
         self.n_rebuilds = 0
         self.vmax_override = None  # wall speed cap override [m/s] (compaction only)
-        # blocks of disks run concurrently: None = one per Numba thread (same bits either way)
+        # blocks of disks run concurrently: None = one per thread of the chosen count (the
+        # bits are the same either way); a test may force any number
         self.nblocks = None
+        self.threads = ThreadChooser(n)
 
     # ------------------------------------------------------------------------------
     @classmethod
@@ -127,11 +131,17 @@ class Simulation:
         p = self.params
         mode, s_from, s_to, ramp_start, ramp_len, rate, len0 = self.control.arrays()
         left = int(nsteps)
-        nblocks = numba.get_num_threads() if self.nblocks is None else int(self.nblocks)
         while left > 0:
             pl = self.pairs
+            nth, chunk = self.threads.next(left)
+            if self.nblocks is None:
+                numba.set_num_threads(nth)
+                nblocks = nth
+            else:   # a forced split runs on the threads the caller set
+                nblocks = int(self.nblocks)
+            t0 = time.perf_counter()
             done = kernels.advance(
-                left, self.x, self.v, self.w, self.theta, self.r, self.m, self.inertia,
+                chunk, self.x, self.v, self.w, self.theta, self.r, self.m, self.inertia,
                 pl.pi, pl.pj, pl.ft, pl.cand_off, pl.cand, self.fext, self.fnet, self.x_ref,
                 self.walls_ref, self.disp2, self.walls, self.prev, self.wF, self.wK,
                 mode, s_from, s_to, ramp_start, ramp_len, rate, len0, self.step,
@@ -139,6 +149,7 @@ class Simulation:
                 self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
                 self.vmax_override or p.servo_vmax,
                 0.5 * p.skin, nblocks)
+            self.threads.record(nth, done * self.n, time.perf_counter() - t0)
             left -= done
             self.step += done
             self.time = self.step * self.dt
@@ -232,3 +243,17 @@ def validate_geometry(x, r, walls):
     if walls[1] <= walls[0] or walls[3] <= walls[2]:
         raise ValueError(f"walls overlap: walls={walls.tolist()}; allowed range: "
                          "x_left < x_right and y_bottom < y_top")
+
+
+def compile_kernels():
+    """Compile (or load from Numba's cache) every kernel a run uses, on a 4-disk sample, so that
+    the first compilation stays out of the timings a command reports."""
+    p = DemParams(n=4)
+    r = np.full(4, p.r_max)
+    x = np.array([[1, 1], [3, 1], [1, 3], [3, 3]], float) * p.r_max
+    sim = Simulation.new(p, x, r, np.array([0.0, 4.0, 0.0, 4.0]) * p.r_max)
+    sim.threads = ThreadChooser(sim.n, 1)
+    sim.run(2)
+    snap = sim.snapshot()
+    sim.love_weber(snap)
+    sim.unbalanced(snap)

@@ -16,11 +16,12 @@ import numpy as np
 
 from hmodel import HParams
 from .adapter import stress_to_model, strain_to_model
-from .indicators import global_indicators, global_w2, local_indicators
-from .mesh import rectangle, from_file
+from .indicators import GlobalCheck, global_w2, local_indicators
+from .mesh import _count, rectangle, from_file
 from hmodel.io import atomic_write_bytes
 
-from .output import CurveWriter, FieldWriter, plot_curve, read_curve, first_events
+from .output import (CurveWriter, FieldWriter, plot_curve, read_curve, first_events, cell_tensor,
+                     nodal_vector, mode_fields, plot_mode)
 from .problem import Biaxial, Imperfection
 from .reference import material_point_curve
 from .solver import LoadStepper
@@ -104,20 +105,26 @@ def _cells(prob):
     return [(kind, np.ascontiguousarray(prob.mesh.t.T))]
 
 
-def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphere, t_start):
-    """One CSV row and the field data of a converged state."""
+def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphere, t_start,
+                 check: GlobalCheck, times: dict):
+    """One CSV row, the field data of a converged state and its bifurcation modes (full dof
+    vectors or None, see GlobalCheck); adds the seconds spent to times["global"], ["local"]."""
     mat = prob.material
     s_m = stress_to_model(trial.sigma)                       # (2, 2, P) compression +
     s1 = -prob.platen_force(f_int) / prob.width
     s2 = float(prob.volume_average(s_m[1, 1]))
     q, p = s1 - s2, 0.5 * (s1 + s2)
+    t0 = time.perf_counter()
     K = prob.stiffness(trial.D)
-    g = global_indicators(K, prob)
+    g, modes = check(K)
+    t1 = time.perf_counter()
+    times["global"] += t1 - t0
     df_int = info["df_int"]
     df_ext = np.zeros_like(df_int)        # reactions on prescribed dofs; f_lat is a dead load
     df_ext[prob.prescribed] = df_int[prob.prescribed]
     w2 = global_w2(info["du"], df_int, df_ext)
     loc = local_indicators(trial.D, n_sphere=n_sphere)
+    times["local"] += time.perf_counter() - t1
     eps_fe = prob.strain(stepper.u)
     row = dict(step=stepper.step, eps1=stepper.eps1, s1=s1, s2=s2, q=q, p=p, eta=q / p,
                newton_iters=info.get("iters", 0), cutbacks=info.get("cutbacks", 0),
@@ -131,13 +138,11 @@ def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphe
                open_fraction=float(prob.volume_average(trial.opened)),
                eps2_mean=float(prob.volume_average(strain_to_model(eps_fe)[1, 1])),
                time_s=time.perf_counter() - t_start, **g, **w2)
-    # fields: displacement at nodes; element means of stress / strain, element minima of indicators
-    nd = np.asarray(prob.basis.nodal_dofs)
-    disp = np.zeros((prob.mesh.p.shape[1], 3))
-    disp[:, 0], disp[:, 1] = stepper.u[nd[0]], stepper.u[nd[1]]
-    voigt = lambda t: np.stack([prob.per_element(t[0, 0]), prob.per_element(t[1, 1]),
-                                prob.per_element(0.5 * (t[0, 1] + t[1, 0]))], axis=1)
-    cell = {"stress": voigt(trial.sigma), "strain": voigt(eps_fe),
+    # fields: displacement and modes at nodes; element means of stress / strain (tensors, FE
+    # convention: tension positive, named so), element minima of the indicators
+    point = {"displacement": nodal_vector(prob, stepper.u), **mode_fields(prob, modes)}
+    cell = {"stress_tension_positive": cell_tensor(prob, trial.sigma),
+            "strain_tension_positive": cell_tensor(prob, eps_fe),
             "q": prob.per_element(s_m[0, 0] - s_m[1, 1]),
             "p": prob.per_element(0.5 * (s_m[0, 0] + s_m[1, 1])),
             "sliding_fraction": prob.per_element(trial.sliding),
@@ -147,7 +152,8 @@ def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphe
     weak = np.zeros(prob.nel)
     weak[prob.weak_elements] = 1.0
     cell["weak"] = weak
-    return row, {"displacement": disp}, {k: [np.ascontiguousarray(v, dtype=float)] for k, v in cell.items()}
+    return (row, point, {k: [np.ascontiguousarray(v, dtype=float)] for k, v in cell.items()},
+            modes)
 
 
 EVENT_LABELS = {
@@ -165,11 +171,6 @@ EVENT_LABELS = {
 def summarize(curve: dict, mp: dict | None) -> tuple[dict, dict]:
     """(events: name -> row index, summary dict) for the curve columns."""
     ev = first_events(curve)
-    for key, col in (("local_lam_Ds", "min_lam_Ds"), ("local_w2", "min_w2_local"),
-                     ("local_rice", "min_rice")):
-        k = np.flatnonzero(curve[col] <= 0)
-        if k.size:
-            ev[key] = int(k[0])
     kq = int(np.argmax(curve["q"]))
     if kq < len(curve["q"]) - 1:
         ev["fe_peak"] = kq
@@ -209,6 +210,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
 
     A step that fails after every cut-back raises RuntimeError; the converged steps are on disk.
     """
+    _count("n_sphere", cfg.n_sphere)      # 0 divides by zero, < 0 turns the local W2 check off
     t_start = time.perf_counter()
     prob = build_problem(cfg)
     stepper = LoadStepper(prob, cfg.d_eps1, rtol=cfg.rtol, max_iter=cfg.max_iter,
@@ -218,7 +220,9 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
     out = Path(out_dir) if out_dir is not None else None
     writer = fields = logf = None
     rows = []
-    t_ind = [0.0]
+    t_ind = {"indicators_output": 0.0, "global": 0.0, "local": 0.0}
+    check = GlobalCheck(prob)
+    first_mode = []     # mode_ks[_f].png drawn once each, at the first lam_min(K_s[_f]) <= 0
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         writer = CurveWriter(out / "curve.csv")
@@ -239,13 +243,21 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
 
     def emit(trial, f_int, info):
         t0 = time.perf_counter()
-        row, pdata, cdata = _step_record(prob, stepper, trial, f_int, info, cfg.n_sphere, t_start)
+        row, pdata, cdata, modes = _step_record(prob, stepper, trial, f_int, info, cfg.n_sphere,
+                                                t_start, check, t_ind)
         rows.append(row)
         if writer is not None:
             writer.write(row)
         if fields is not None:
             fields.write(row["eps1"], pdata, cdata)
-        t_ind[0] += time.perf_counter() - t0
+        for suf, control in (("", "displ."), ("_f", "force")):
+            if out is not None and suf not in first_mode and modes.get("mode_ks" + suf) is not None:
+                first_mode.append(suf)
+                plot_mode(out / f"mode_ks{suf}.png", prob, modes["mode_ks" + suf],
+                          title=(rf"eigenvector of $\lambda_{{min}}(K_s)$ = "
+                                 f"{row['lam_min_ks' + suf]:.4g} Pa, platen {control}, step "
+                                 rf"{row['step']}, $\varepsilon_1$ = {100 * row['eps1']:.3f} %"))
+        t_ind["indicators_output"] += time.perf_counter() - t0
         if progress is not None:
             progress(f"step {row['step']:4d} eps1 = {100 * row['eps1']:7.4f} % q = {row['q'] / 1e3:9.3f} kPa "
                      f"eta = {row['eta']:.4f} it = {row['newton_iters']} cut = {row['cutbacks']} "
@@ -284,7 +296,9 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
     curve = {k: np.array([r.get(k, np.nan) for r in rows], dtype=float) for k in rows[0]}
     mp = material_point_curve(prob.params, max(cfg.eps1_max, 1e-4)) if cfg.mp_reference else None
     events, summ = summarize(curve, mp)
-    timings = dict(stepper.times, total=time.perf_counter() - t_start, indicators_output=t_ind[0],
+    timings = dict(stepper.times, total=time.perf_counter() - t_start,
+                   indicators_output=t_ind["indicators_output"], global_indicators=t_ind["global"],
+                   local_indicators=t_ind["local"],
                    steps=stepper.step, points=prob.npts, n_dir=prob.params.n_dir)
     summ["timings"] = timings
     summ["config"] = asdict(cfg)

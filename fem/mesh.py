@@ -95,10 +95,11 @@ def check_mesh(p: np.ndarray, t: np.ndarray, oriented: bool = True) -> None:
 def from_meshio(m) -> skfem.Mesh:
     """skfem mesh from a meshio.Mesh holding triangles or quadrilaterals (2D or z = 0 points)."""
     import skfem.io.meshio as skio
-    cells = m.cells_dict
+    cells = {k: v for k, v in m.cells_dict.items() if len(v)}
     kind = "quad" if "quad" in cells else "triangle" if "triangle" in cells else None
     if kind is None:
-        raise ValueError(f"mesh file must hold 'quad' or 'triangle' cells, got {list(cells)}")
+        raise ValueError(f"mesh file must hold 'quad' or 'triangle' cells, got "
+                         f"{list(cells) or 'no cells'}")
     pts = np.asarray(m.points, dtype=float)
     if pts.shape[1] == 3:
         if np.any(np.abs(pts[:, 2]) > 0):
@@ -110,6 +111,21 @@ def from_meshio(m) -> skfem.Mesh:
 
 
 def from_file(path) -> skfem.Mesh:
-    """Read a triangle or quadrilateral mesh with meshio (any format meshio reads)."""
+    """Read a triangle or quadrilateral mesh with meshio (any format meshio reads). A missing
+    file, a file meshio cannot read and a mesh without elements are ValueErrors."""
+    import contextlib
+    import io
+    import os
+
     import meshio
-    return from_meshio(meshio.read(path))
+    if not os.path.isfile(path):
+        raise ValueError("no such file")
+    said = io.StringIO()
+    try:    # meshio prints its reasons and exits (SystemExit) or raises by format: say it once
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            m = meshio.read(path)
+    except (Exception, SystemExit) as e:
+        why = (said.getvalue().strip() or str(e).strip() or type(e).__name__).splitlines()[0]
+        raise ValueError(f"not a mesh meshio can read ({why}): allowed a triangle or "
+                         "quadrilateral mesh file") from None
+    return from_meshio(m)

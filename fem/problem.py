@@ -55,9 +55,12 @@ class Imperfection:
     def __post_init__(self):
         if self.kind not in ("spot", "band"):
             raise ValueError(f"Imperfection.kind {self.kind!r} is not allowed: allowed 'spot' or 'band'")
-        if not (np.isfinite(self.size) and self.size > 0):
-            raise ValueError(f"Imperfection.size = {self.size!r} is out of range: allowed size > 0 "
+        if not (np.isfinite(self.size) and 0 < self.size <= 1):
+            raise ValueError(f"Imperfection.size = {self.size!r} is out of range: allowed 0 < size <= 1 "
                              "(fraction of the specimen width)")
+        if not np.isfinite(self.angle):
+            raise ValueError(f"Imperfection.angle = {self.angle!r} is out of range: allowed a finite "
+                             "angle [deg]")
         if self.phi_g is None and self.alpha0 is None:
             raise ValueError("Imperfection needs a weaker phi_g or alpha0")
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import _kernels
 from .material import (HState, reference_state, to_voigt, kernel_args, _material_args,
-                       increment_from_outputs)
+                       increment_from_outputs, check_state)
 from .params import HParams
 
 __all__ = [
@@ -102,6 +102,7 @@ def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_targ
     guess : (3,) initial strain increment (the strain-controlled entries are overwritten).
     Returns (Increment, d_eps (3,), iterations). Raises MixedControlError if Newton fails.
     """
+    check_state(state, params)
     sc = np.array(control.strain_controlled, dtype=np.bool_)
     de = np.zeros(3) if guess is None else np.array(guess, dtype=float)
     de[sc] = np.asarray(control.d_eps)[sc]
@@ -142,6 +143,7 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
         raise ValueError("run_path drives a single material point (batch shape ())")
     if int(n_steps) < 1:
         raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+    check_state(state, params)
     n_steps = int(n_steps)
     if keep_states:
         return _run_path_steps(state, params, control, n_steps, until, progress, label, rtol, max_iter)
@@ -212,7 +214,8 @@ def _path_result(state, work, sliding, sig0, h_de, h_sig, h_it, h_nsl, h_nop) ->
                    T1=T1.reshape(n), N2=N2.reshape(n), l1=l1.reshape(n), l2=l2.reshape(n),
                    cos_alpha=ca.reshape(n), sin_alpha=sa.reshape(n),
                    eps=_tensor(eps[0]), stress=_tensor(last_sig), V0=np.array(float(V0[0])),
-                   sliding=sliding.reshape(n).copy(), is_open=was_open.reshape(n).copy())
+                   sliding=sliding.reshape(n).copy(), is_open=was_open.reshape(n).copy(),
+                   params_key=state.params_key)
     return PathResult(
         eps=np.vstack([np.zeros(3), np.cumsum(h_de, axis=0)]), sigma=np.vstack([sig0, h_sig]),
         newton_iters=np.concatenate([[0], h_it]),

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import NamedTuple
 
 import numpy as np
@@ -16,7 +17,42 @@ from .params import HParams
 from .probes import ProbeResult, directional_sweep
 
 __all__ = ["biaxial_test", "state_at_eta", "biaxial_columns", "probe_columns", "DomainPoint",
-           "domain_point", "bifurcation_domain"]
+           "domain_point", "bifurcation_domain", "compile_kernels", "DOMAIN_EPS1_MAX"]
+
+# the axial strain where the searches for point A and for the domain boundaries give up [-]
+DOMAIN_EPS1_MAX = 0.2
+
+
+def compile_kernels(extra=(), warm=None, stream=None) -> float:
+    """The first run after an install compiles the Numba kernels (a minute or more): if they are
+    not in Numba's cache, say so once ("compiling kernels, once: about a minute"), compile them
+    on a tiny case (n_dir = 8) and say how long it took, so that the timings a command reports
+    leave it out. ``extra``: more Numba functions to check, ``warm()``: compiles them.
+    Returns the compilation time [s] (0.0 when everything was cached)."""
+    import sys
+
+    from . import _kernels
+    from .driver import mixed_step
+    from .material import update_full
+    from .options import announce_compilation
+    from .probes import strain_probes
+    stream = sys.stderr if stream is None else stream
+    kernels = (_kernels.update_serial, _kernels.update_parallel, _kernels.mixed_step_single,
+               _kernels.path_single) + tuple(extra)
+    if not announce_compilation(kernels, stream):
+        return 0.0
+    t0 = time.perf_counter()
+    p = HParams(n_dir=8)
+    s = isotropic_state(p)                                   # path_single
+    mixed_step(s, p, drained_biaxial(1e-5), [0.0, p.p0, 0.0])  # mixed_step_single
+    update_full(s, np.zeros((2, 2)), p)                       # update_serial
+    strain_probes(s, p, np.linspace(0.0, 360.0, 64, endpoint=False))   # update_parallel
+    if warm is not None:
+        warm()
+    dt = time.perf_counter() - t0
+    print(f"compiled in {dt:.1f} s (cached now; not counted in the timings below)", file=stream,
+          flush=True)
+    return dt
 
 
 def _check_sigma2(sigma2):
@@ -41,11 +77,14 @@ def biaxial_test(params: HParams, sigma2: float | None = None, d_eps1: float = 1
 
 
 def state_at_eta(params: HParams, eta: float, sigma2: float | None = None, d_eps1: float = 1e-5,
-                 eps1_max: float = 0.2) -> tuple[PathResult, HState]:
+                 eps1_max: float = DOMAIN_EPS1_MAX) -> tuple[PathResult, HState]:
     """Run the drained path to the first state with eta >= ``eta`` (point A for eta = 1.029).
     Raises ValueError if the path peaks below ``eta``."""
     sigma2 = params.p0 if sigma2 is None else float(sigma2)
     _check_sigma2(sigma2)
+    if not (np.isfinite(eta) and 0 < eta < 2):
+        # nan never stops the path, eta <= 0 stops it at its first step: both silently wrong
+        raise ValueError(f"eta = {eta!r} is out of range: allowed 0 < eta < 2 (q/p < 2 while sigma2 > 0)")
     p = params.replace(p0=sigma2)
     n = int(round(eps1_max / d_eps1))
     r = run_path(isotropic_state(p), p, drained_biaxial(d_eps1), n,
@@ -95,10 +134,10 @@ class DomainPoint(NamedTuple):
 
 
 def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_every: int = 25,
-                 n_dir_probe: int = 180, eps1_max: float = 0.2) -> DomainPoint:
+                 n_dir_probe: int = 180, eps1_max: float = DOMAIN_EPS1_MAX) -> DomainPoint:
     """Scan the drained path at ``sigma2`` [Pa]: every ``check_every`` steps the minimum over
-    directions of W2 and W2_sigma (adaptive strain-probe sweep); once one is <= 0 the last
-    ``check_every`` steps are replayed one by one to find the first state where it is."""
+    directions of W2 and W2_sigma (adaptive strain-probe sweep); once one is <= 0 the states of
+    the last ``check_every`` steps are bisected to find the first state where it is."""
     _check_sigma2(sigma2)
     p = params.replace(p0=float(sigma2))
     ctl = drained_biaxial(d_eps1)
@@ -114,6 +153,24 @@ def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_eve
         sw = directional_sweep(st, p, n=n_dir_probe)
         return {"w2": bool(np.nanmin(sw.w2) <= 0.0), "w2_sigma": bool(np.nanmin(sw.w2_sigma) <= 0.0)}
 
+    def first_firing(states, f_end, keys):
+        """Row of ``states`` (1..m) of the first state where each of ``keys`` fires, knowing that
+        it fires at row m (``f_end``) and not at row 0 (the previous check). Bisection, which
+        finds the first row if a criterion that fires keeps firing within the block (the cone
+        widens as eta grows towards the peak; tests/hmodel/test_bad_input.py checks it against a
+        sweep at every step); one sweep per tried row serves both criteria."""
+        seen = {len(states) - 1: f_end}
+        out = {}
+        for key in keys:
+            lo, hi = 0, len(states) - 1
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                if mid not in seen:
+                    seen[mid] = fires(states[mid])
+                lo, hi = (lo, mid) if seen[mid][key] else (mid, hi)
+            out[key] = hi
+        return out
+
     while steps < n_max and (peak is None or any(v is None for v in found.values())):
         r = run_path(state, p, ctl, check_every, keep_states=any(v is None for v in found.values()))
         pp, qq, _ = r.invariants()
@@ -124,12 +181,9 @@ def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_eve
             q_prev = qq[j]
         if any(v is None for v in found.values()):
             f_end = fires(r.state)
-            for key in found:
-                if found[key] is None and f_end[key]:
-                    for j in range(1, len(r.states)):
-                        if fires(r.states[j])[key]:
-                            found[key] = (pp[j], qq[j], eps1 + r.eps[j, 0])
-                            break
+            keys = [key for key in found if found[key] is None and f_end[key]]
+            for key, j in first_firing(r.states, f_end, keys).items():
+                found[key] = (pp[j], qq[j], eps1 + r.eps[j, 0])
         eps1 += r.eps[-1, 0]
         steps += check_every
         state = r.state
@@ -146,16 +200,56 @@ def _domain_job(args):
     return domain_point(params, s2, **kw)
 
 
-def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None, **kw) -> list[DomainPoint]:
-    """``domain_point`` for every confining pressure, in parallel processes (``workers``,
-    default min(len, cpu count); 1 runs in this process). Results in the input order."""
+def _domain_worker_init():
+    """A worker process of ``bifurcation_domain``: one Numba thread (the processes are the
+    parallelism: a parallel kernel in each of them oversubscribes the cores; the default domain
+    took 28 s instead of 8 s on 2 cores beside another job), and Ctrl-C left to the parent,
+    which stops the workers itself."""
+    import signal
+
+    import numba
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    numba.set_num_threads(1)
+
+
+def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
+                       progress=None, **kw) -> list[DomainPoint]:
+    """``domain_point`` for every confining pressure, in parallel processes (``workers`` >= 1,
+    default min(len, cpu count); 1 runs in this process). Results in the input order.
+    ``progress``: None or a callable taking one line of text, called as each pressure is done."""
     sig = [float(s) for s in sigma2_list]
     for s in sig:
         _check_sigma2(s)
+    if workers is not None and not (float(workers) == int(workers) and int(workers) >= 1):
+        raise ValueError(f"workers = {workers!r} is out of range: allowed an integer >= 1 (or None)")
     workers = min(len(sig), os.cpu_count() or 1) if workers is None else int(workers)
     jobs = [(params, s, kw) for s in sig]
+    t0 = time.perf_counter()
+    out = [None] * len(jobs)
+
+    def done(k, point):
+        out[k] = point
+        if progress is not None:
+            n = sum(o is not None for o in out)
+            progress(f"domain: sigma2 = {sig[k]:g} Pa done ({n}/{len(sig)}, "
+                     f"{time.perf_counter() - t0:.1f} s)")
+
     if workers <= 1 or len(sig) == 1:
-        return [_domain_job(j) for j in jobs]
+        for k, j in enumerate(jobs):
+            done(k, _domain_job(j))
+        return out
     # spawn, not fork: a fork after Numba's parallel kernel has started its threads can crash
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as ex:
-        return list(ex.map(_domain_job, jobs))
+    ex = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), initializer=_domain_worker_init,
+                             mp_context=multiprocessing.get_context("spawn"))
+    try:
+        futures = {ex.submit(_domain_job, j): k for k, j in enumerate(jobs)}
+        for f in as_completed(futures):
+            done(futures[f], f.result())
+    except BaseException:
+        # interrupted or failed: stop the workers now rather than after their current pressure
+        for proc in list((getattr(ex, "_processes", None) or {}).values()):
+            proc.terminate()
+        raise
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
+    return out

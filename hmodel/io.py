@@ -7,12 +7,33 @@ from contextlib import contextmanager
 
 import numpy as np
 
-__all__ = ["atomic_open", "atomic_write_bytes", "write_csv", "save_figure", "read_csv"]
+__all__ = ["atomic_open", "atomic_write_bytes", "write_csv", "save_figure", "read_csv", "file_mode"]
+
+
+def _umask() -> int:
+    """The process umask (read without changing it where /proc says it, else set and restored)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    m = os.umask(0o022)
+    os.umask(m)
+    return m
+
+
+def file_mode() -> int:
+    """The mode an ordinary new file gets: 0666 less the umask (0644 with the usual 022)."""
+    return 0o666 & ~_umask()
 
 
 @contextmanager
 def atomic_open(path, mode="w"):
-    """Open a temporary file beside ``path``; it replaces ``path`` only if the block succeeds."""
+    """Open a temporary file beside ``path``; it replaces ``path`` only if the block succeeds.
+    The file gets the mode of an ordinary new file (``file_mode``: 0644 under umask 022), not
+    the 0600 of a temporary file."""
     path = os.fspath(path)
     d = os.path.dirname(os.path.abspath(path))
     os.makedirs(d, exist_ok=True)
@@ -21,7 +42,7 @@ def atomic_open(path, mode="w"):
         with os.fdopen(fd, mode) as f:
             yield f
             f.flush()
-            os.fchmod(f.fileno(), 0o644)    # mkstemp makes 0600; outputs are ordinary files
+            os.fchmod(f.fileno(), file_mode())    # mkstemp makes 0600; outputs are ordinary files
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:

@@ -23,7 +23,7 @@ from .params import HParams
 
 __all__ = [
     "HState", "HEX_FIELDS", "Increment", "reference_state", "update", "update_full", "broadcast_state",
-    "to_voigt", "from_voigt", "tangent_from_voigt", "take_points",
+    "to_voigt", "from_voigt", "tangent_from_voigt", "take_points", "check_state",
 ]
 
 # Above this many points the parallel kernel pays for its thread start-up.
@@ -42,6 +42,9 @@ class HState(NamedTuple):
     stress : (2, 2, *batch) Cauchy stress [Pa], compression positive.
     V0 : (*batch,) reference volume [m^3] of the average hexagon, h sum_i omega_i l1_i l2_i.
     sliding, is_open : (*batch, n_dir) bool, the pattern of the step that produced this state.
+    params_key : ``HParams.state_key`` of the parameters the state was made with (the material
+    constants the update uses); ``update`` refuses a state whose key is not its parameters'
+    (None: a state assembled by hand, not checked).
     """
 
     d1: np.ndarray
@@ -59,6 +62,7 @@ class HState(NamedTuple):
     V0: np.ndarray
     sliding: np.ndarray
     is_open: np.ndarray
+    params_key: tuple | None = None
 
     @property
     def batch_shape(self) -> tuple:
@@ -157,7 +161,8 @@ def reference_state(params: HParams, batch_shape: tuple = ()) -> HState:
         l1=full(l1), l2=full(l2), cos_alpha=full(np.cos(a0)), sin_alpha=full(np.sin(a0)),
         eps=np.zeros((2, 2) + batch_shape),
         stress=np.zeros((2, 2) + batch_shape), V0=np.full(batch_shape, V0),
-        sliding=np.zeros(shape, dtype=bool), is_open=np.zeros(shape, dtype=bool))
+        sliding=np.zeros(shape, dtype=bool), is_open=np.zeros(shape, dtype=bool),
+        params_key=params.state_key)
 
 
 def broadcast_state(state: HState, batch_shape: tuple) -> HState:
@@ -171,7 +176,7 @@ def broadcast_state(state: HState, batch_shape: tuple) -> HState:
     return HState(*(hexf(getattr(state, f)) for f in HEX_FIELDS),
                   eps=tens(state.eps), stress=tens(state.stress),
                   V0=np.full(batch_shape, float(state.V0)),
-                  sliding=hexf(state.sliding), is_open=hexf(state.is_open))
+                  sliding=hexf(state.sliding), is_open=hexf(state.is_open), params_key=state.params_key)
 
 
 def take_points(state: HState, index) -> HState:
@@ -182,7 +187,7 @@ def take_points(state: HState, index) -> HState:
     tens = lambda a: a.reshape(2, 2, -1)[:, :, idx]
     return HState(*(hexf(getattr(state, f)) for f in HEX_FIELDS),
                   eps=tens(state.eps), stress=tens(state.stress), V0=state.V0.reshape(-1)[idx],
-                  sliding=hexf(state.sliding), is_open=hexf(state.is_open))
+                  sliding=hexf(state.sliding), is_open=hexf(state.is_open), params_key=state.params_key)
 
 
 # -- the update --------------------------------------------------------------------------------
@@ -202,8 +207,7 @@ def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = Tru
         raise ValueError(f"d_eps must have shape (2, 2) + batch = {(2, 2) + batch}, got {d_eps.shape}")
     if not np.all(np.isfinite(d_eps)):
         raise ValueError("d_eps contains non-finite values (nan or inf)")
-    if state.n_dir != params.n_dir:
-        raise ValueError(f"state has n_dir = {state.n_dir} orientations but params.n_dir = {params.n_dir}")
+    check_state(state, params)
     args = kernel_args(state, params)
     npts = args[-1].shape[0]
     de = to_voigt(d_eps)
@@ -212,7 +216,36 @@ def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = Tru
         parallel = npts >= PARALLEL_MIN_POINTS
     kern = _kernels.update_parallel if parallel else _kernels.update_serial
     kern(*args[:-1], de, *_material_args(params), bool(allow_sliding), bool(extras), *out)
+    sig, tan = out[12], out[13]
+    if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
+        _refuse_non_finite(state)
     return increment_from_outputs(state, de, out)
+
+
+def check_state(state: HState, params: HParams) -> None:
+    """Refuse a state that was not made with ``params``: a different number of orientations, or
+    a ``params_key`` (the constants kn, kt, phi_g, r_g, n_dir and fabric the update uses) that is
+    not ``params.state_key``. O(1): the key is a tuple carried by every state the library makes,
+    exact for every constant (a geometric check could only see r_g and kn, through the
+    branch lengths and normal forces, and costs a pass over every hexagon)."""
+    if state.n_dir != params.n_dir:
+        raise ValueError(f"state has n_dir = {state.n_dir} orientations but params.n_dir = {params.n_dir}")
+    if state.params_key is not None and state.params_key != params.state_key:
+        names = ("kn", "kt", "phi_g", "r_g", "n_dir", "fabric_a", "fabric_b")
+        diff = [f"{n} {a!r} (state) != {b!r}" for n, a, b in zip(names, state.params_key, params.state_key)
+                if a != b]
+        raise ValueError("the state was made with other parameters than the ones given: "
+                         + ", ".join(diff))
+
+
+def _refuse_non_finite(state: HState):
+    """The update gave a non-finite stress or tangent: name the state field that is not finite."""
+    for f in HEX_FIELDS + ("eps", "V0"):
+        a = np.asarray(getattr(state, f), dtype=float)
+        if not np.isfinite(a).all():
+            raise ValueError(f"the state has non-finite values (nan or inf) in {f} "
+                             f"({int(np.count_nonzero(~np.isfinite(a)))} entries): refused")
+    raise ValueError("the update gave a non-finite stress or tangent from a finite state")
 
 
 def _material_args(params: HParams):
@@ -247,7 +280,7 @@ def increment_from_outputs(state: HState, de: np.ndarray, out) -> Increment:
         l1=nl1.reshape(hshape), l2=nl2.reshape(hshape),
         cos_alpha=nca.reshape(hshape), sin_alpha=nsa.reshape(hshape),
         eps=state.eps + from_voigt(de, batch), stress=stress, V0=np.array(state.V0, dtype=float),
-        sliding=slid.reshape(hshape), is_open=opn.reshape(hshape))
+        sliding=slid.reshape(hshape), is_open=opn.reshape(hshape), params_key=state.params_key)
     return Increment(
         stress=stress, tangent=tangent_from_voigt(tan, batch), state=new_state,
         tangent_lagrangian=tangent_from_voigt(tanL, batch), dPi=from_voigt(dPi, batch),

@@ -2,11 +2,12 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-__all__ = ["HParams"]
+__all__ = ["HParams", "ParamError"]
 
 # Grains 2-6 touch when alpha <= 30 deg (l2 = 4 r sin alpha <= 2 r); grains 1-4 when alpha >= 90 deg.
 ALPHA0_MIN_DEG = 30.0
@@ -50,12 +51,12 @@ class HParams:
             v = getattr(self, f.name)
             if v is None:
                 continue
-            try:
-                fv = float(v)
-            except (TypeError, ValueError):
-                raise ValueError(f"HParams.{f.name} must be a real number, got {v!r}") from None
-            if not math.isfinite(fv):
-                raise ValueError(f"HParams.{f.name} must be finite, got {v!r}")
+            # a real number, not a string that float() would read ('1e6') nor a bool
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+                raise ParamError(f.name, v, "a real number", f"HParams.{f.name} must be a real "
+                                 f"number, got {v!r} ({type(v).__name__})")
+            if not math.isfinite(float(v)):
+                raise ParamError(f.name, v, "a finite number", f"HParams.{f.name} must be finite, got {v!r}")
         _check(self.kn > 0, "kn", "kn > 0 [N/m]", self.kn)
         _check(self.kt >= 0, "kt", "kt >= 0 [N/m]", self.kt)
         _check(0.0 < self.phi_g < 90.0, "phi_g", "0 < phi_g < 90 [deg]", self.phi_g)
@@ -93,6 +94,14 @@ class HParams:
         w = 1.0 + self.fabric_a * np.cos(2.0 * (self.theta - math.radians(self.fabric_b)))
         return w / self.n_dir
 
+    @property
+    def state_key(self) -> tuple:
+        """The constants the update uses (kn, kt, phi_g, r_g, n_dir, fabric_a, fabric_b): a state
+        carries the key of the parameters it was made with (``HState.params_key``). p0, alpha0
+        and the thickness only shape the initial state and its volume, which the state holds."""
+        return (float(self.kn), float(self.kt), float(self.phi_g), float(self.r_g), int(self.n_dir),
+                float(self.fabric_a), float(self.fabric_b))
+
     def replace(self, **changes) -> "HParams":
         """A copy with some fields changed (validated again)."""
         kw = {f.name: getattr(self, f.name) for f in fields(self) if not f.name.startswith("_")}
@@ -100,6 +109,15 @@ class HParams:
         return HParams(**kw)
 
 
+class ParamError(ValueError):
+    """An HParams field out of range: ``name`` (the field), ``value``, ``allowed`` (the range, as
+    text), so that a command line can name its own option instead of the field."""
+
+    def __init__(self, name, value, allowed, message=None):
+        self.name, self.value, self.allowed = name, value, allowed
+        super().__init__(message or f"HParams.{name} = {value!r} is out of range: allowed {allowed}")
+
+
 def _check(ok, name, allowed, value):
     if not ok:
-        raise ValueError(f"HParams.{name} = {value!r} is out of range: allowed {allowed}")
+        raise ParamError(name, value, allowed)

@@ -18,18 +18,22 @@ __all__ = ["fig_q_eps1", "fig_epsv_eps1", "fig_probes", "fig_stress_components",
            "fig_w2_split", "fig_domain", "fig_w2_normal_tangential", "polar_axes"]
 
 
-def _mark(ax, x, y, label="A"):
-    ax.plot([x], [y], "o", color="C3", zorder=5)
-    ax.annotate(label, (x, y), textcoords="offset points", xytext=(6, -12), color="C3")
+def _mark(ax, x, y, label="A", marker="o", color="C3", offset=(6, -12)):
+    ax.plot([x], [y], marker, color=color, zorder=5)
+    ax.annotate(label, (x, y), textcoords="offset points", xytext=offset, color=color)
 
 
-def _strain_curves(curves, path, point_a, title, yscale, ylabel):
-    """One quantity (scaled by ``yscale``) of drained-test curves against eps1 [%]."""
+def _strain_curves(curves, path, point_a, title, yscale, ylabel, peak=None):
+    """One quantity (scaled by ``yscale``) of drained-test curves against eps1 [%]; ``point_a``
+    and ``peak``: None or (eps1 [-], value) to mark."""
     fig, ax = plt.subplots(figsize=(6, 4.2))
     for label, e1, y in curves:
         ax.plot(100 * np.asarray(e1), yscale * np.asarray(y), label=label)
     if point_a is not None:
         _mark(ax, 100 * point_a[0], yscale * point_a[1])
+    if peak is not None:
+        _mark(ax, 100 * peak[0], yscale * peak[1], label=f"peak ({100 * peak[0]:.2f} %)",
+              marker="v", color="k", offset=(8, -16))
     ax.set_xlabel(r"axial strain $\varepsilon_1$ [%]")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -39,10 +43,11 @@ def _strain_curves(curves, path, point_a, title, yscale, ylabel):
     save_figure(fig, path)
 
 
-def fig_q_eps1(curves, path, point_a=None, title="Drained biaxial test: deviatoric stress"):
-    """Fig. 4 / 13: q = s1 - s2 [kPa] against eps1 [%]. ``curves``: list of (label, eps1, q)."""
+def fig_q_eps1(curves, path, point_a=None, title="Drained biaxial test: deviatoric stress", peak=None):
+    """Fig. 4 / 13: q = s1 - s2 [kPa] against eps1 [%]. ``curves``: list of (label, eps1, q);
+    ``point_a``, ``peak``: None or (eps1 [-], q [Pa]) marked on the figure."""
     _strain_curves(curves, path, point_a, title, 1e-3,
-                   r"deviatoric stress $q = \sigma_1 - \sigma_2$ [kPa]")
+                   r"deviatoric stress $q = \sigma_1 - \sigma_2$ [kPa]", peak=peak)
 
 
 def fig_epsv_eps1(curves, path, point_a=None, title="Drained biaxial test: volumetric strain"):
@@ -163,7 +168,8 @@ def fig_w2_split(pr, path):
         x.grid(alpha=0.3)
     ax.set_xlim(0, 360)
     ax.set_xticks(range(0, 361, 45))
-    ax.legend(fontsize=8)
+    # the legend beside the two panels, never on the curves
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(1.1, -0.2), ncol=5, frameon=False)
     neg = (pr.w2_sigma <= 0) | (pr.w2 <= 0)
     if neg.any():
         lo, hi = pr.alpha_sigma[neg].min(), pr.alpha_sigma[neg].max()

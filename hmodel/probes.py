@@ -225,6 +225,9 @@ def stress_probes(state: HState, params: HParams, alpha_sigma_deg, sigma_norm: f
     regime (the plastic modulus vanishes there) and is a different, path-dependent question.
     """
     _check_state(state)
+    if sigma_norm is not None and not (np.isfinite(sigma_norm) and sigma_norm > 0):
+        raise ValueError(f"sigma_norm = {sigma_norm!r} is out of range: allowed a stress norm > 0 [Pa] "
+                         "(or None: the rate probes unscaled)")
     targets = np.atleast_1d(np.asarray(alpha_sigma_deg, dtype=float)) % 360.0
     if sweep is None:
         sweep = directional_sweep(state, params, allow_sliding=allow_sliding)

@@ -20,8 +20,8 @@ ALPHAS = [0.0, 60.0, 90.0, 150.0, 200.0, 225.0, 235.0, 240.0, 245.0, 250.0, 260.
 @pytest.fixture(scope="module")
 def xc(tmp_path_factory):
     out = tmp_path_factory.mktemp("crosscheck")
-    c, timings = run_crosscheck(out, n=300, rate=0.1, dem_max_steps=60_000, workers=2,
-                                fem_mesh=(2, 4), fem_n_dir=72, dem_alphas=ALPHAS)
+    c, timings = run_crosscheck(out, n=300, rate=0.1, workers=2, fem_mesh=(2, 4), fem_n_dir=72,
+                                dem_alphas=ALPHAS, dem_domain=False)
     return out, c
 
 
@@ -31,13 +31,40 @@ def test_outputs_written(xc):
     for f in ("fig_stress_strain.png", "fig_polar_w2.png", "fig_micro_macro.png",
               "fig_normal_tangential.png", "fig_domain.png"):
         assert (out / f).stat().st_size > 20_000 and f"({f})" in rep
-    pdir = out / "dem" / "probes"
+    pdir = out / "dem" / "domain" / c["dem"]["state"]["state"]
     for f in ("fig15_w2.png", "fig16_w2_micro.png", "fig17_w2_nt.png"):
         assert (pdir / f).stat().st_size > 20_000
     header = (pdir / "probes.csv").read_text().splitlines()
-    assert header[0].startswith("alpha_sigma,w2,w2_micro,w2n,w2t") and len(header) == 1 + len(ALPHAS)
+    assert header[0].startswith("alpha_sigma,outcome,w2,w2_micro,w2n,w2t") and len(header) == 1 + len(ALPHAS)
+    assert (pdir / "probe_histories.csv").stat().st_size > 0
     saved = json.loads((out / "conclusions.json").read_text())
     assert saved["conclusions"]["hmodel"]["cone_w2"] == c["hmodel"]["cone_w2"]
+
+
+def test_comparison_state_by_its_rule_and_every_probe_decided(xc):
+    # the highest saved state whose reference held and whose probe targets all stay below the
+    # largest stress ratio held by a reference; there no probe may be undecided
+    from dem import io
+    from dem.domain import _eta, max_eta_increment
+    out, c = xc
+    st = c["dem"]["state"]
+    assert st["rule_met"]
+    assert st["limit"] == min([st["eta_held_max"]] + ([st["eta_failed_min"]] if st["eta_failed_min"] else []))
+    assert st["eta_R"] + st["max_eta_increment"] <= st["limit"]
+    held = {}
+    for r in c["dem_domain"]["rows"]:
+        R, meta = io.load_state(out / "dem" / "domain" / r["state"] / "stateR.npz")
+        assert meta["outcome"] == r["reference"]
+        if r["reference"] == "equilibrium":
+            held[r["state"]] = (_eta(R.control.s_to[1], R.control.s_to[0]),
+                                max_eta_increment(R, 2500.0, ALPHAS))
+    assert max(e for e, _ in held.values()) == st["eta_held_max"]
+    ok = [nm for nm, (e, inc) in held.items() if e + inc <= st["limit"]]
+    assert st["state"] == max(ok, key=lambda nm: held[nm][0])
+    # the strength under stress control is bracketed: the peak state cannot be held
+    assert any(r["reference"] == "failure" for r in c["dem_domain"]["rows"])
+    d = c["dem"]
+    assert d["n_undecided"] == 0 and d["n_equilibrium"] + d["n_failure"] == len(ALPHAS)
 
 
 def test_instability_cone_in_third_quadrant_in_both_models(xc):
@@ -53,10 +80,17 @@ def test_instability_cone_in_third_quadrant_in_both_models(xc):
 
 
 def test_plastic_zones_agree(xc):
+    # The DEM's zone is known to the resolution of its probe directions: its start lies between
+    # the last elastic and the first plastic direction, its end between the last plastic and the
+    # next elastic one.  The H-model's boundaries lie within 20 deg of those brackets.
     _, c = xc
     (h_lo, h_hi), = c["hmodel"]["plastic_zone"]
     (d_lo, d_hi), = c["dem"]["plastic_zone"]
-    assert abs(h_lo - d_lo) <= 20 and abs(h_hi - d_hi) <= 20
+    a = sorted(ALPHAS)
+    lo_bracket = (max(x for x in a if x < d_lo), d_lo)
+    hi_bracket = (d_hi, min(x for x in a if x > d_hi))
+    assert lo_bracket[0] - 20 <= h_lo <= lo_bracket[1] + 20
+    assert hi_bracket[0] - 20 <= h_hi <= hi_bracket[1] + 20
 
 
 def test_micro_against_macro(xc):

@@ -189,3 +189,29 @@ def test_vtk_snapshots_roundtrip(small_sample, tmp_path):
     assert len(c.cells[0].data) == len(snap.ci)
     assert np.allclose(c.cell_data["normal_force"][0], snap.fn)
     assert np.all(c.cell_data["normal_force"][0] > 0)
+
+
+def test_outputs_are_0644_and_a_missing_state_is_named(tmp_path):
+    # atomic writes go through mkstemp (0600): the finished file gets the usual 0666 & ~umask
+    import os
+    from dem import io
+    old = os.umask(0o022)
+    try:
+        io.atomic_write_bytes(tmp_path / "a.txt", b"x")
+        io.write_csv(tmp_path / "b.csv", ["a"], [[1.0]])
+    finally:
+        os.umask(old)
+    for f in ("a.txt", "b.csv"):
+        assert os.stat(tmp_path / f).st_mode & 0o777 == 0o644
+    with pytest.raises(ValueError, match="no such file"):
+        io.load_state(tmp_path / "missing.npz")
+
+
+def test_state_params_must_be_complete():
+    from dem.params import DemParams
+    d = DemParams().to_dict()
+    with pytest.raises(ValueError, match="unknown keys"):
+        DemParams.from_dict({**d, "kn_typo": 1.0})
+    d.pop("friction_deg")
+    with pytest.raises(ValueError, match="missing keys"):
+        DemParams.from_dict(d)

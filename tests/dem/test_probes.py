@@ -27,8 +27,8 @@ def test_elastic_probe_micro_equals_macro(small_sample):
     # the residual non-equilibrium at both ends (unbalanced ratio < 1e-4).  Tolerance 0.01
     # on the normalized W2 (values are O(1)).
     opts = ProbeOptions()
-    R, ok, _, _ = prepare_reference(small_sample, opts)
-    assert ok
+    R, res = prepare_reference(small_sample, opts)
+    assert res.outcome == "equilibrium"
     for alpha in (0.0, 135.0, 225.0):
         r = run_probe(R, alpha, sliding=False, opts=opts)
         assert r["converged"]
@@ -49,7 +49,7 @@ def test_elastic_strain_is_reversible_direction(small_sample):
     # opposite stress increments give opposite elastic strains (linear elasticity):
     # |de(alpha) + de(alpha+180)| small compared with |de|; tolerance 5 % (equilibrium
     # tolerance of each probe ~ 1 % of the strain).
-    R, ok, _, _ = prepare_reference(small_sample)
+    R, _ = prepare_reference(small_sample)
     a = run_probe(R, 30.0, sliding=False)
     b = run_probe(R, 210.0, sliding=False)
     da = np.array([a["de1"], a["de2"]])
@@ -95,8 +95,8 @@ def test_cli_biaxial_and_probes(tmp_path):
 
 @pytest.fixture(scope="module")
 def reference(small_sample):
-    R, ok, _, _ = prepare_reference(small_sample)
-    assert ok
+    R, res = prepare_reference(small_sample)
+    assert res.outcome == "equilibrium"
     return R
 
 

@@ -1,4 +1,5 @@
 """A biaxial run interrupted after a checkpoint and resumed gives the same CSV."""
+import numpy as np
 import pytest
 
 from dem import experiment, io
@@ -31,6 +32,19 @@ def test_biaxial_resume_equals_uninterrupted(tmp_path, monkeypatch):
     assert len(rows_a) == len(rows_b) == len(ref.rows)
     assert rows_a == rows_b  # bit-identical values (repr round trip)
     assert not (tmp_path / "b" / "checkpoint.npz").exists()
+    # eta_a = 5 is never reached: the fallback A (first state at 0.97 of the peak eta) and the
+    # states along the path come from states kept before the interruption too, and are the
+    # uninterrupted run's to the bit
+    assert not ref.eta_a_reached and res.state_a_path
+    for rel in ["stateA.npz"] + ["states/" + r["file"] for r in
+                                 io.read_csv(tmp_path / "a" / "states" / "states.csv")[1]]:
+        sa, ma = io.load_state(tmp_path / "a" / rel)
+        sb, mb = io.load_state(tmp_path / "b" / rel)
+        assert ma == mb and sa.step == sb.step
+        assert all(np.array_equal(x, y) for x, y in zip(sa[1:13], sb[1:13]))
+    assert ((tmp_path / "a" / "states" / "states.csv").read_bytes()
+            == (tmp_path / "b" / "states" / "states.csv").read_bytes())
+    assert not (tmp_path / "b" / "candidates").exists()
 
 
 def test_crosscheck_dem_part_resumes_what_an_interrupted_run_finished(tmp_path, monkeypatch):
@@ -40,9 +54,9 @@ def test_crosscheck_dem_part_resumes_what_an_interrupted_run_finished(tmp_path, 
     import dem.probes as probes
     from dem import crosscheck
     kw = dict(n=150, seed=2, rate=0.2, alphas=[45.0, 225.0], max_steps=20_000, workers=1,
-              eta_a=0.3, threads=1)
+              eta_a=0.3, threads=1, domain=False)
     ref = crosscheck.dem_part(str(tmp_path), **kw)
-    ck = tmp_path / "probes" / "probe_runs.jsonl"
+    ck = tmp_path / "domain" / ref["comparison"]["state"] / "probe_runs.jsonl"
     lines = ck.read_text().splitlines()
     ck.write_text("\n".join(lines[:-1]) + "\n")       # the last run was lost
     calls = []
@@ -50,8 +64,9 @@ def test_crosscheck_dem_part_resumes_what_an_interrupted_run_finished(tmp_path, 
     monkeypatch.setattr(probes, "_task", lambda t: calls.append(t[1:3]) or real(t))
     monkeypatch.setattr(experiment, "run_biaxial", lambda *a, **k: pytest.fail("biaxial rerun"))
     res = crosscheck.dem_part(str(tmp_path), resume=True, **kw)
-    assert calls == [(225.0, False)]
+    assert calls == [(225.0, True)]          # sliding runs come last (after their elastic ones)
     assert res["probes"] == ref["probes"]
+    assert res["comparison"] == ref["comparison"]
     assert res["eta_a_reached"] == ref["eta_a_reached"]
     assert len(res["biaxial_rows"]) == len(ref["biaxial_rows"])
     assert all(a == b for ra, rb in zip(res["biaxial_rows"], ref["biaxial_rows"]) for a, b in zip(ra, rb))

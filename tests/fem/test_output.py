@@ -4,7 +4,7 @@ import json
 import meshio
 import numpy as np
 
-from fem.output import CURVE_COLUMNS, read_curve
+from fem.output import CURVE_COLUMNS, MODE_FIELDS, read_curve
 
 
 def test_csv(homogeneous_run):
@@ -36,8 +36,11 @@ def test_xdmf_reads_back_every_step(homogeneous_run):
             t, pd, cd = r.read_data(k)
             times.append(t)
             assert pd["displacement"].shape == (points.shape[0], 3)
-            for name in ("stress", "strain"):
-                assert cd[name][0].shape == (prob.nel, 3)
+            for name in MODE_FIELDS:                  # the same point fields at every step
+                assert pd[name].shape == (points.shape[0], 3)
+            for name in ("stress_tension_positive", "strain_tension_positive"):
+                assert cd[name][0].shape == (prob.nel, 9)     # 3 x 3 tensors, row by row
+            assert "stress" not in cd and "strain" not in cd  # no field without its sign convention
             for name in ("det_D", "det_Ds", "lam_min_Ds", "w2_min", "rice_min",
                          "sliding_fraction", "open_fraction", "q", "p"):
                 assert cd[name][0].shape == (prob.nel,)
@@ -46,7 +49,16 @@ def test_xdmf_reads_back_every_step(homogeneous_run):
         t, pd, cd = r.read_data(n - 1)
         top = np.isclose(points[:, 1], prob.height)
         assert np.allclose(pd["displacement"][top, 1], -0.03 * prob.height, rtol=1e-10)
-        assert np.allclose(cd["stress"][0][:, 1], -homogeneous_run.curve["s1"][-1], rtol=1e-8)
+        sig = cd["stress_tension_positive"][0].reshape(-1, 3, 3)
+        eps = cd["strain_tension_positive"][0].reshape(-1, 3, 3)
+        # tension positive: the compressed axis is negative, -s1 and -eps1; p, q compression +
+        assert np.allclose(sig[:, 1, 1], -homogeneous_run.curve["s1"][-1], rtol=1e-8)
+        assert np.allclose(sig[:, 0, 0], -200e3, rtol=1e-8)
+        assert np.allclose(eps[:, 1, 1], -0.03, rtol=1e-10)
+        assert np.allclose(cd["p"][0], -0.5 * (sig[:, 0, 0] + sig[:, 1, 1]), rtol=1e-12)
+        assert np.allclose(cd["q"][0], sig[:, 0, 0] - sig[:, 1, 1], rtol=1e-12)
+        assert np.all(sig[:, 2, :] == 0) and np.all(sig[:, :, 2] == 0)          # plane, 2-D model
+        assert np.allclose(sig, np.swapaxes(sig, 1, 2)) and np.allclose(eps, np.swapaxes(eps, 1, 2))
         assert np.all((cd["sliding_fraction"][0] >= 0) & (cd["sliding_fraction"][0] <= 1))
 
 

@@ -1,0 +1,319 @@
+"""The DEM's bifurcation domain along one drained path (paper Fig. 10, for the DEM).
+
+``run_domain`` takes the states that ``dem biaxial`` saved along the path
+(``DIR/states/states.csv``), relaxes each into a reference R under stress control and runs the
+directional analysis there, every probe of every state being one independent run of one
+pool (local processes or dask).  Each probe ends ``equilibrium``, ``failure`` or
+``undecided`` (``dem.settle``).  Per state (``domain.csv``): the counts of each outcome, the
+minimum W2 over the equilibrium probes and its direction, the cone of W2 <= 0 and the failure
+directions.  Along the path:
+
+* the **lower boundary** of the bifurcation domain is the first state (in eta) where some
+  direction has W2 <= 0 or fails (Eq. 1: a runaway is W2 <= 0 in the limit);
+* the **upper boundary** is the plastic limit under stress control, eta_lim, bracketed by the
+  probe targets (and references) that held and those that ran away: the largest eta of a
+  target that reached equilibrium and the smallest eta of a target that failed.
+
+The figure compares them with the H-model's boundary at the same confining pressure, in eta and
+as a fraction of each model's peak.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+from . import io
+from .probes import (COLUMNS as PROBE_COLUMNS, ProbeOptions, _map, csv_rows, directions,
+                     reference_state, run_probe_sets, state_fingerprint, write_probe_files)
+
+DOMAIN_COLUMNS = ["state", "eta", "eta_fraction", "eps1", "p", "q", "reference", "probed",
+                  "n_equilibrium", "n_failure", "n_undecided", "min_w2", "alpha_min_w2",
+                  "cone_w2", "failure_directions", "eta_target_max_held",
+                  "eta_target_min_failed"]
+
+
+def _eta(s1, s2):
+    return (s1 - s2) / (0.5 * (s1 + s2))
+
+
+def max_eta_increment(state, norm, alphas):
+    """Largest eta(s_R + ds) - eta(s_R) over the probe directions ``alphas`` [deg] of norm
+    ``norm`` [Pa] from the reference ``state``."""
+    s1, s2 = state.control.s_to[1], state.control.s_to[0]
+    a = np.radians(np.asarray(alphas, float))
+    return float(np.max(_eta(s1 + norm * np.sin(a), s2 + norm * np.cos(a))) - _eta(s1, s2))
+
+
+def target_etas(rows, state):
+    """eta of each probe's target stress s_R + ds (p = (s1 + s2)/2): (eta (k,), outcome (k,))."""
+    s = state.control.s_to            # (sx, sy) of the reference's stress control
+    s1, s2 = s[1], s[0]
+    a = np.radians([r["alpha_sigma"] for r in rows])
+    norm = np.hypot(rows[0]["ds1"], rows[0]["ds2"]) if rows else 0.0
+    return (np.array([_eta(s1 + norm * math.sin(x), s2 + norm * math.cos(x)) for x in a]),
+            np.array([r["outcome"] for r in rows]))
+
+
+def state_row(name, meta_row, eta_peak, ref_outcome, rows, state):
+    """One row of domain.csv (see DOMAIN_COLUMNS)."""
+    from hmodel.probes import arcs
+    s1, s2 = state.control.s_to[1], state.control.s_to[0]
+    out = {"state": name, "eta": _eta(s1, s2), "eta_fraction": _eta(s1, s2) / eta_peak,
+           "eps1": float(meta_row["eps1"]), "p": 0.5 * (s1 + s2), "q": s1 - s2,
+           "reference": ref_outcome, "probed": bool(rows), "n_equilibrium": 0, "n_failure": 0, "n_undecided": 0,
+           "min_w2": math.nan, "alpha_min_w2": math.nan, "cone_w2": "", "failure_directions": "",
+           "eta_target_max_held": math.nan, "eta_target_min_failed": math.nan}
+    if ref_outcome == "failure":
+        # R itself ran away at constant stress: the state lies above eta_lim
+        out["eta_target_min_failed"] = out["eta"]
+        return out
+    if not rows:
+        return out
+    a = np.array([r["alpha_sigma"] for r in rows])
+    oc = np.array([r["outcome"] for r in rows])
+    w2 = np.array([r["w2"] for r in rows])
+    eq = oc == "equilibrium"
+    for k in ("equilibrium", "failure", "undecided"):
+        out[f"n_{k}"] = int(np.sum(oc == k))
+    if eq.any():
+        j = np.flatnonzero(eq)[np.argmin(w2[eq])]
+        out["min_w2"], out["alpha_min_w2"] = float(w2[j]), float(a[j])
+        out["cone_w2"] = json.dumps(arcs(a[eq], w2[eq] <= 0))
+    out["failure_directions"] = json.dumps([float(x) for x in a[oc == "failure"]])
+    et, _ = target_etas(rows, state)
+    if eq.any():
+        out["eta_target_max_held"] = float(et[eq].max())
+    if (oc == "failure").any():
+        out["eta_target_min_failed"] = float(et[oc == "failure"].min())
+    if ref_outcome == "equilibrium":
+        out["eta_target_max_held"] = float(np.nanmax([out["eta_target_max_held"], out["eta"]]))
+    return out
+
+
+def boundaries(domain_rows, eta_peak):
+    """The DEM's lower boundary (first state with W2 <= 0 among equilibrium probes or a
+    failure, and the last state before it) and eta_lim bracket: dict."""
+    rows = sorted(domain_rows, key=lambda r: r["eta"])
+    first = next((r for r in rows if r["reference"] == "failure" or r["n_failure"] > 0
+                  or (r["min_w2"] == r["min_w2"] and r["min_w2"] <= 0)), None)
+    before = [r for r in rows if r["probed"] and (first is None or r["eta"] < first["eta"])]
+    held = [r["eta_target_max_held"] for r in rows if r["eta_target_max_held"] == r["eta_target_max_held"]]
+    failed = [r["eta_target_min_failed"] for r in rows
+              if r["eta_target_min_failed"] == r["eta_target_min_failed"]]
+    lo = max(held) if held else math.nan
+    hi = min(failed) if failed else math.nan
+    return {"eta_peak": eta_peak,
+            "lower_state": first["state"] if first else None,
+            "lower_eta": first["eta"] if first else math.nan,
+            "lower_eta_fraction": first["eta"] / eta_peak if first else math.nan,
+            "lower_why": (None if first is None else "reference failed" if first["reference"] == "failure"
+                          else "failure" if first["n_failure"] else "W2 <= 0"),
+            "last_stable_eta": before[-1]["eta"] if before else math.nan,
+            "eta_lim_low": lo, "eta_lim_high": hi,
+            "eta_lim_bracket_consistent": bool(not (lo == lo and hi == hi) or lo <= hi)}
+
+
+def _relax_task(args):
+    state, opts, out_dir, resume = args
+    return reference_state(state, out_dir, opts, resume=resume, verbose=False, threads=1)
+
+
+def load_states(biaxial_dir, names=None):
+    """[(name, State, meta)] of ``biaxial_dir/states`` (all, or the listed file names / targets),
+    and the biaxial peak eta."""
+    sdir = os.path.join(biaxial_dir, "states")
+    listing = os.path.join(sdir, "states.csv")
+    if not os.path.exists(listing):
+        raise ValueError(f"--biaxial {biaxial_dir}: no states/states.csv (run `python -m dem "
+                         "biaxial` with this code: it saves states along the path)")
+    _, rows = io.read_csv(listing)
+    with open(os.path.join(biaxial_dir, "summary.json")) as f:
+        eta_peak = float(json.load(f)["eta_max"])
+    if names:
+        known = {r["file"] for r in rows} | {r["target"] for r in rows}
+        bad = [n for n in names if n not in known]
+        if bad:
+            raise ValueError(f"--states {','.join(bad)}: not saved in {sdir}; allowed: "
+                             + ", ".join(r["target"] for r in rows))
+        rows = [r for r in rows if r["file"] in names or r["target"] in names]
+    out, steps = [], set()
+    for r in sorted(rows, key=lambda r: float(r["eta"])):
+        if r["step"] in steps:
+            continue        # two targets met by the same recorded state: analysed once
+        steps.add(r["step"])
+        st, meta = io.load_state(os.path.join(sdir, r["file"]))
+        out.append((os.path.splitext(r["file"])[0], st, meta))
+    return out, eta_peak
+
+
+def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions(),
+               workers=None, scheduler=None, resume=False, verbose=True, hmodel=True,
+               choose=None):
+    """Relax every saved state, run its directional analysis (one pool for all), write
+    ``out_dir/domain.csv``, ``domain_probes.csv``, ``boundaries.json``, one sub-folder per state
+    (stateR.npz, probe_runs.jsonl, probes.csv, probe_histories.csv, Figs. 15-17) and the
+    figures ``fig_domain_w2.png`` and ``fig_domain.png``.
+
+    ``choose(references) -> names``: called once the references are relaxed with a list of
+    (name, State R, outcome, meta), it names the states whose directional analysis is run
+    (default: every state whose reference held).  Returns (domain rows, boundaries, rows of
+    probes by state name)."""
+    opts.validate()
+    alphas = directions() if alphas is None else [float(a) for a in alphas]
+    todo, eta_peak = load_states(biaxial_dir, states)
+    t0 = time.time()
+    os.makedirs(out_dir, exist_ok=True)
+    log = (lambda m: print(f"[domain] {m}", file=sys.stderr, flush=True)) if verbose else (lambda m: None)
+    dirs = [os.path.join(out_dir, name) for name, _, _ in todo]
+    for d in dirs:
+        os.makedirs(d, exist_ok=True)
+        ck = os.path.join(d, "probe_runs.jsonl")
+        if not resume and os.path.exists(ck):
+            os.remove(ck)
+    log(f"{len(todo)} states x {len(alphas)} directions x 2 runs; relaxing the references")
+    refs = [None] * len(todo)
+
+    def got_ref(k, res):
+        refs[k] = res
+        log(f"reference of {todo[k][0]}: {res[1]} ({sum(r is not None for r in refs)}/{len(refs)}, "
+            f"{time.time() - t0:.0f} s)")
+
+    _map([(k, (st, opts, d, resume)) for k, ((_, st, _), d) in enumerate(zip(todo, dirs))],
+         got_ref, workers, scheduler, fn=_relax_task)
+    live = [k for k in range(len(todo)) if refs[k][1] != "failure"]
+    if choose is not None:
+        names = set(choose([(todo[k][0], refs[k][0], refs[k][1], todo[k][2]) for k in range(len(todo))]))
+        live = [k for k in live if todo[k][0] in names]
+    sets = [(refs[k][0], alphas, os.path.join(dirs[k], "probe_runs.jsonl")) for k in live]
+    nf = sum(r[1] == "failure" for r in refs)
+    log(f"probes of {len(live)} of {len(todo)} states ({nf} references failed: above eta_lim)")
+    results = run_probe_sets(sets, opts, workers, scheduler, verbose)
+    by = dict(zip(live, results))
+    drows, prow = [], []
+    for k, (name, st, meta) in enumerate(todo):
+        rows = by.get(k, [])
+        if rows:
+            write_probe_files(rows, dirs[k], note=f"{name}, {st.params.n} disks")
+        drows.append(state_row(name, meta["row"], eta_peak, refs[k][1], rows, refs[k][0]))
+        prow += [[name, drows[-1]["eta"]] + r for r in csv_rows(rows)]
+    io.write_csv(os.path.join(out_dir, "domain.csv"), DOMAIN_COLUMNS,
+                 [[r[c] for c in DOMAIN_COLUMNS] for r in drows])
+    io.write_csv(os.path.join(out_dir, "domain_probes.csv"), ["state", "state_eta"] + PROBE_COLUMNS,
+                 prow)
+    b = boundaries(drows, eta_peak)
+    b.update(n_disks=todo[0][1].params.n if todo else None, wall_time=time.time() - t0,
+             directions=alphas, options=opts._asdict(), biaxial=os.path.abspath(biaxial_dir),
+             fingerprints={name: state_fingerprint(st) for name, st, _ in todo})
+    hm = (hmodel if isinstance(hmodel, dict) else
+          hmodel_boundary(todo[0][1].control.s_to[0] if todo else 200e3) if hmodel else None)
+    if hm:
+        b["hmodel"] = hm
+    io.atomic_write_bytes(os.path.join(out_dir, "boundaries.json"),
+                          json.dumps(b, indent=1, default=float).encode())
+    plot_domain(drows, by, todo, b, out_dir)
+    log(f"done in {time.time() - t0:.0f} s: lower boundary {b['lower_state']} "
+        f"(eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the peak); eta_lim in "
+        f"[{b['eta_lim_low']:.4f}, {b['eta_lim_high']:.4f}]")
+    return drows, b, {todo[k][0]: by[k] for k in by}
+
+
+def hmodel_boundary(sigma2):
+    """The H-model's lower boundary (first W2 <= 0 and W2_sigma <= 0) and peak on the drained
+    path at ``sigma2`` [Pa] (Table I parameters, p = (s1 + s2)/2)."""
+    from hmodel import HParams
+    from hmodel.experiment import bifurcation_domain
+    d = bifurcation_domain(HParams(p0=float(sigma2)), [float(sigma2)], workers=1)[0]
+    peak = d.q_peak / d.p_peak
+    return {"sigma2": float(sigma2), "eta_w2": d.q_w2 / d.p_w2,
+            "eta_w2sigma": d.q_w2sigma / d.p_w2sigma, "eta_peak": peak,
+            "eta_w2_fraction": d.q_w2 / d.p_w2 / peak}
+
+
+def plot_domain(drows, by, todo, b, out_dir):
+    """fig_domain_w2.png: W2 against alpha_sigma for every state (failures on the W2 = 0 line);
+    fig_domain.png: the lower boundary and eta_lim of the DEM beside the H-model's, in eta and
+    as a fraction of each model's peak."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(8, 4.8), constrained_layout=True)
+    cmap = plt.get_cmap("viridis")
+    for k, (name, st, _) in enumerate(todo):
+        rows = by.get(k, [])
+        c = cmap(k / max(1, len(todo) - 1))
+        lab = f"eta = {drows[k]['eta']:.3f} ({drows[k]['eta_fraction']:.3f} of peak)"
+        if not rows:
+            ax.plot([], [], color=c, label=lab + ": reference failed")
+            continue
+        a = np.array([r["alpha_sigma"] for r in rows])
+        oc = np.array([r["outcome"] for r in rows])
+        w = np.array([r["w2"] if r["outcome"] == "equilibrium" else np.nan for r in rows])
+        ax.plot(a, w, "o-", ms=3, lw=1, color=c, label=lab)
+        f = oc == "failure"
+        ax.plot(a[f], np.zeros(f.sum()), "^", color=c, mec="C3", ms=7)
+        u = oc == "undecided"
+        ax.plot(a[u], np.zeros(u.sum()), "s", color="0.6", ms=5)
+    ax.plot([], [], "^", color="w", mec="C3", label="failure (runaway)")
+    ax.plot([], [], "s", color="0.6", label="undecided")
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_xlim(0, 360)
+    ax.set_xticks(range(0, 361, 45))
+    ax.set_xlabel(r"$\alpha_\sigma$ [deg] ($\tan\alpha_\sigma = d\sigma_1/d\sigma_2$)")
+    ax.set_ylabel(r"normalized second-order work $W_2$ [-]")
+    n = b.get("n_disks")
+    ax.set_title(f"DEM directional analyses along the drained path ({n} disks)", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    _save(fig, os.path.join(out_dir, "fig_domain_w2.png"))
+
+    fig, axs = plt.subplots(1, 2, figsize=(10, 4.6), constrained_layout=True)
+    for ax, frac in zip(axs, (False, True)):
+        scale_d = b["eta_peak"] if frac else 1.0
+        x = 0
+        et = np.array([r["eta"] for r in drows]) / scale_d
+        cls = ["C3" if (r["reference"] == "failure" or r["n_failure"]) else
+               "C1" if (r["min_w2"] == r["min_w2"] and r["min_w2"] <= 0) else "C2" for r in drows]
+        ax.scatter(np.full(len(et), x), et, c=cls, s=30, zorder=3)
+        if b["lower_eta"] == b["lower_eta"]:
+            ax.hlines(b["lower_eta"] / scale_d, x - 0.3, x + 0.3, color="k", lw=2)
+        lo, hi = b["eta_lim_low"] / scale_d, b["eta_lim_high"] / scale_d
+        if lo == lo and hi == hi:
+            ax.fill_between([x - 0.3, x + 0.3], lo, hi, color="C3", alpha=0.25, lw=0)
+        ax.hlines(1.0 if frac else b["eta_peak"], x - 0.3, x + 0.3, color="k", ls=":", lw=1)
+        labels = ["DEM"]
+        hm = b.get("hmodel")
+        if hm:
+            sh = hm["eta_peak"] if frac else 1.0
+            ax.hlines(hm["eta_w2"] / sh, 0.7, 1.3, color="k", lw=2)
+            ax.hlines(hm["eta_w2sigma"] / sh, 0.7, 1.3, color="k", lw=1, ls="--")
+            ax.hlines(hm["eta_peak"] / sh, 0.7, 1.3, color="k", ls=":", lw=1)
+            labels.append("H-model")
+        ax.set_xticks(range(len(labels)))
+        ax.set_xticklabels(labels)
+        ax.set_xlim(-0.6, len(labels) - 0.4)
+        ax.set_ylabel("eta / eta_peak of the model" if frac else r"$\eta = q/p$, $p = (s_1+s_2)/2$")
+        ax.grid(alpha=0.3, axis="y")
+    axs[0].plot([], [], "o", color="C2", label="all W2 > 0")
+    axs[0].plot([], [], "o", color="C1", label="W2 <= 0 (equilibrium)")
+    axs[0].plot([], [], "o", color="C3", label="failure")
+    axs[0].plot([], [], "-", color="k", lw=2, label="lower boundary (first W2 <= 0 or failure)")
+    axs[0].plot([], [], "--", color="k", lw=1, label=r"H-model: first $W_2^\sigma \leq 0$")
+    axs[0].fill_between([], [], [], color="C3", alpha=0.25, label=r"DEM $\eta_{lim}$ (held / failed targets)")
+    axs[0].plot([], [], ":", color="k", label="peak of the strain-controlled test")
+    fig.legend(loc="lower center", ncol=3, fontsize=7, frameon=False, bbox_to_anchor=(0.5, -0.12))
+    fig.suptitle("Bifurcation domain at the confining pressure of the DEM sample: lower boundary "
+                 "and plastic limit", fontsize=10)
+    _save(fig, os.path.join(out_dir, "fig_domain.png"))
+
+
+def _save(fig, path):
+    import matplotlib.pyplot as plt
+    tmp = os.path.join(os.path.dirname(path), ".tmp-" + os.path.basename(path))
+    fig.savefig(tmp, dpi=120, format="png", bbox_inches="tight")
+    plt.close(fig)
+    os.replace(tmp, path)

@@ -1,0 +1,179 @@
+"""How a stress-controlled run ends: equilibrium, failure or undecided, by rule.
+
+Paper Eq. 1: d2Ec = W2_ext - W2_int.  Under stress control the loading is prescribed; where
+the sample's second-order work vanishes in the loading direction the increment cannot be
+balanced and the kinetic energy bursts: the sample runs away (a *failure*, a result).  A
+probe can also creep and settle late (an *equilibrium* reached slowly), and the two look
+alike for a while.  ``settle`` runs the sample under its current control, checks it every
+``check_every`` steps, records the history of every check and stops on the first of:
+
+* **equilibrium**: over the whole trailing window of ``window`` steps (see
+  ``window_steps``: it grows with the sample's size) the unbalanced-force ratio stayed
+  below ``unbalanced_tol``, the wall stresses stayed within ``stress_tol`` of their
+  targets and the wall strains moved by less than ``strain_tol`` times the strain scale
+  (the probe's own strain increment |de|, or, for a relaxation, the elastic strain of a
+  probe: ``voigt_strain``), and the kinetic energy of the backbone (disks with two contacts
+  or more; rattlers fly undamped because Cundall damping scales with the force) is below
+  ``ke_tol`` per disk.  A once-checked test can pass at the slow start of a collapse (two
+  probes at A did, with the wrong sign of W2); a window cannot, because the collapse moves
+  the strains during it.
+* **failure**: the strain increment is beyond ``runaway_ratio`` times the elastic probe's, the
+  servo has not held the wall stresses within ``runaway_stress`` (250 Pa, ten times the
+  equilibrium tolerance, and kept when that is tightened) at any check of the last window (the
+  sample deforms faster than the walls can follow: the burst) and the backbone's kinetic energy
+  has not fallen to less than half over that window (a decaying creep, as after a
+  strain-controlled loading, is not a runaway), or the strain increment is beyond
+  ``fail_ratio`` times the elastic strain, more than any settled probe was measured to reach.
+* **undecided**: neither by ``max_steps``; its creep rate (strain rate over the last window,
+  1/s) is reported.
+
+The thresholds come from the probe histories in ``shared/spec/dem-directional.md`` (1000 and
+2000 disks): settled probes reach at most ~220 times the elastic strain and hold the stresses
+to < 1 Pa after ~50,000 steps; runaways pass 400 times with stress errors of kPa.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+HISTORY_COLUMNS = ["step", "kinetic_energy", "kinetic_energy_backbone", "unbalanced",
+                   "eps1", "eps2", "s1", "s2", "stress_error", "strain_ratio"]
+OUTCOMES = ("equilibrium", "failure", "undecided")
+
+
+class SettleRule(NamedTuple):
+    """Tolerances of ``settle`` (SI; strains compression positive, axis 1 = y)."""
+    unbalanced_tol: float = 1e-4    # unbalanced-force ratio, at every check of the window
+    stress_tol: float = 25.0        # |wall stress - target| [Pa], at every check of the window
+    strain_tol: float = 0.01        # strain drift over the window / strain scale
+    ke_tol: float = 1e-10           # backbone kinetic energy per disk [J]
+    window: int = 20_000            # window [steps] at 1000 disks (window_steps scales it)
+    check_every: int = 1000         # steps between checks
+    runaway_ratio: float = 100.0    # |de| / |de_elastic| beyond which a sustained stress
+    fail_ratio: float = 1000.0      # error is a failure; beyond fail_ratio alone it is one
+    max_steps: int = 400_000        # cap [steps]: undecided when reached
+    runaway_stress: float = 250.0   # the sustained stress error of a runaway [Pa]
+    fail_strain: float = math.inf   # failure: |de| beyond this, whatever the scale [-]
+
+    def validate(self, prefix=""):
+        checks = (("unbalanced_tol", 0 < self.unbalanced_tol < 1, "0 < unbalanced_tol < 1"),
+                  ("stress_tol", self.stress_tol > 0, "stress_tol > 0 [Pa]"),
+                  ("strain_tol", 0 < self.strain_tol < 1, "0 < strain_tol < 1"),
+                  ("ke_tol", self.ke_tol > 0, "ke_tol > 0 [J per disk]"),
+                  ("window", self.window >= self.check_every, "window >= check_every [steps]"),
+                  ("check_every", self.check_every > 0, "check_every > 0 [steps]"),
+                  ("runaway_ratio", self.runaway_ratio > 1, "runaway_ratio > 1"),
+                  ("fail_ratio", self.fail_ratio > self.runaway_ratio,
+                   "fail_ratio > runaway_ratio"),
+                  ("max_steps", self.max_steps > 0, "max_steps > 0"),
+                  ("runaway_stress", self.runaway_stress > 0, "runaway_stress > 0 [Pa]"),
+                  ("fail_strain", self.fail_strain > 0, "fail_strain > 0"))
+        for name, ok, rng in checks:
+            val = getattr(self, name)
+            bad = isinstance(val, float) and (math.isnan(val) or
+                                              (math.isinf(val) and name != "fail_strain"))
+            if not ok or bad:
+                raise ValueError(f"{prefix}{name}={val!r}; allowed range: {rng}")
+        return self
+
+
+def window_steps(n_disks: int, rule: SettleRule) -> int:
+    """The window for a sample of ``n_disks``: ``rule.window`` at 1000 disks, scaled with the
+    sample's width (sqrt of n: the time a disturbance takes to cross it), a whole number of
+    checks."""
+    w = rule.window * math.sqrt(max(n_disks, 1) / 1000.0)
+    return int(math.ceil(w / rule.check_every)) * rule.check_every
+
+
+class Settled(NamedTuple):
+    outcome: str                # one of OUTCOMES
+    steps: int                  # steps run by settle
+    unbalanced: float           # at the last check
+    ke_peak_backbone: float     # largest backbone kinetic energy seen [J]
+    strain_ratio: float         # |de| / elastic scale at the end
+    creep_rate: float           # |d eps| / dt over the last window [1/s]
+    history: np.ndarray         # (checks, len(HISTORY_COLUMNS))
+
+
+def backbone_kinetic_energy(sim, snap):
+    """Kinetic energy [J] of the disks with two contacts or more (walls included)."""
+    cnt = (np.bincount(snap.ci, minlength=sim.n) + np.bincount(snap.cj, minlength=sim.n)
+           + np.bincount(snap.wp, minlength=sim.n))
+    b = cnt >= 2
+    return 0.5 * float(np.sum(sim.m[b, None] * sim.v[b] ** 2) + np.sum(sim.inertia[b] * sim.w[b] ** 2))
+
+
+def voigt_strain(sim, norm: float) -> float:
+    """Elastic strain [-] of a stress increment of ``norm`` [Pa] under the Voigt (uniform
+    strain) estimate of the contact stiffness, E = (3/8) sum_c kn |l_c|^2 / V (3/8 = mean of
+    n1^4 over directions): a lower bound of the real elastic strain, so a drift tolerance
+    built on it is on the strict side."""
+    snap = sim.snapshot()
+    l2 = np.sum((sim.x[snap.cj] - sim.x[snap.ci]) ** 2, axis=1)
+    e = 0.375 * sim.params.kn * float(np.sum(l2)) / sim.volume
+    return norm / e if e > 0 else math.inf
+
+
+def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_scale=None,
+           progress=None) -> Settled:
+    """Run ``sim`` (its control already set) until equilibrium, failure or ``rule.max_steps``
+    (see the module docstring).  ``target_xy``: wall-stress targets (s_xx, s_yy) [Pa];
+    ``eps0``: wall strains (eps1, eps2) at the start of the probe (default: now);
+    ``de_elastic``: |de| of the elastic probe in the same direction (failure rules);
+    ``strain_scale``: the strain scale of the drift test when |de| is not one (relaxation)
+    and of the strain ratio when ``de_elastic`` is not given.  ``progress(steps, row)``:
+    called after each check."""
+    target = np.asarray(target_xy, float)
+    e = lambda: sim.strain()[::-1]                      # (eps1, eps2) = (y, x)
+    eps0 = e() if eps0 is None else np.asarray(eps0, float)
+    w_checks = window_steps(sim.n, rule) // rule.check_every
+    el = de_elastic if de_elastic else strain_scale
+    hist = []
+    steps = 0
+    while True:
+        snap = sim.snapshot()
+        sx, sy = sim.wall_stress(snap)
+        ub = sim.unbalanced(snap)
+        de = e() - eps0
+        err = float(np.max(np.abs(np.array([sx, sy]) - target)))
+        ratio = float(np.linalg.norm(de) / el) if el else math.nan
+        hist.append([sim.step, sim.kinetic_energy(), backbone_kinetic_energy(sim, snap), ub,
+                     de[0] + eps0[0], de[1] + eps0[1], sy, sx, err, ratio])
+        if progress:
+            progress(steps, hist[-1])
+        outcome = _decide(np.asarray(hist[-(w_checks + 1):]), de, ratio, rule, sim.n,
+                          w_checks, strain_scale)
+        if outcome is None and steps >= rule.max_steps:
+            outcome = "undecided"
+        if outcome is not None:
+            h = np.asarray(hist, float)
+            k = max(0, len(h) - 1 - w_checks)
+            dt_win = (h[-1, 0] - h[k, 0]) * sim.dt
+            creep = (float(np.linalg.norm(h[-1, 4:6] - h[k, 4:6]) / dt_win) if dt_win > 0
+                     else math.nan)
+            return Settled(outcome, steps, ub, float(h[:, 2].max()), ratio, creep, h)
+        k = min(rule.check_every, rule.max_steps - steps)
+        sim.run(k)
+        steps += k
+
+
+def _decide(win, de, ratio, rule, n, w_checks, strain_scale):
+    """Outcome at the last row of ``win`` (the trailing window of checks), or None."""
+    if ratio > rule.fail_ratio or float(np.linalg.norm(de)) > rule.fail_strain:
+        return "failure"
+    if len(win) < w_checks + 1:
+        return None                                     # not a whole window yet
+    keb = win[:, 2]
+    if (ratio > rule.runaway_ratio and np.all(win[:, 8] > rule.runaway_stress)
+            and keb[-1] >= 0.5 * keb[0]):
+        # ... and the motion is not dying out: the creep that follows a strain-controlled
+        # loading also keeps the servo off target for a while, with decaying kinetic energy
+        return "failure"
+    scale = max(float(np.linalg.norm(de)), strain_scale or 0.0)
+    drift = float(np.max(np.linalg.norm(win[:, 4:6] - win[-1, 4:6], axis=1)))
+    if (np.all(win[:, 3] <= rule.unbalanced_tol) and np.all(win[:, 8] <= rule.stress_tol)
+            and drift <= rule.strain_tol * scale and win[-1, 2] <= rule.ke_tol * n):
+        return "equilibrium"
+    return None

@@ -1,0 +1,122 @@
+"""How many threads a run uses: a fixed count, or ``auto`` (the default).
+
+The kernel gives the same bits for any number of disk blocks (``kernels._block_step``), so the
+thread count is a pure speed choice and may change between two calls of ``kernels.advance``.
+Two threads pay two barriers per step; on a 2-core machine where another process keeps a core
+busy, a barrier waits for the OS to schedule the other thread, ~5-20 ms a step (measured: a
+300-disk biaxial test went from 5.5 s on one thread to more than 300 s on two).  Whether more
+threads help therefore depends on the sample size *and* on what else the machine does, which
+can change during a run.  ``auto``:
+
+* one thread below ``SERIAL_BELOW`` disks (a step is too short for the barriers to pay);
+* above, it times every ``advance`` call (wall clock, particle-steps per second) and runs with
+  whichever of 1 and ``max_threads`` thread(s) is faster, re-trying the slower choice in a short
+  chunk (``TRIAL_STEPS``) after ``RETRY_S`` seconds, the interval doubling (to ``RETRY_MAX_S``)
+  each time the trial loses.  The cost of a losing trial is bounded by a few tenths of a second
+  per retry interval, so a run is never much slower than on one thread, however the load moves.
+
+The figures behind the constants are printed by ``python bench/bench_dem.py`` (one thread
+against ``auto`` at 300, 2000 and 12,000 disks, alone and beside a busy process).
+"""
+from __future__ import annotations
+
+import os
+import time
+
+import numba
+
+SERIAL_BELOW = 1000     # disks: below, one thread (two barriers a step cost more than they save)
+TRIAL_STEPS = 3         # steps of a trial chunk (a losing trial costs at most ~3 x 20 ms)
+RETRY_S = 5.0           # first retry interval [s] of the losing choice
+RETRY_MAX_S = 120.0     # cap of the doubling retry interval [s]
+
+_default = None         # None = auto; an int = fixed count (set_default_threads)
+
+
+def available_threads() -> int:
+    """Threads Numba may use here: its pool size, capped by the cores this process may run on."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return max(1, min(numba.config.NUMBA_NUM_THREADS, cores))
+
+
+def check_threads(threads, option="--threads"):
+    """ValueError unless ``threads`` is None (auto) or an int in [1, available_threads()]."""
+    if threads is None:
+        return None
+    hi = available_threads()
+    if isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= hi:
+        raise ValueError(f"{option}={threads!r}; allowed range: 1 <= {option.lstrip('-')} <= {hi} "
+                         "(the cores this process may use), or omit it for auto")
+    return threads
+
+
+def set_default_threads(threads):
+    """Thread count of every Simulation that does not set its own: None = auto, or an int."""
+    global _default
+    _default = check_threads(threads)
+
+
+def default_threads():
+    return _default
+
+
+class ThreadChooser:
+    """Chooses the thread count of each ``advance`` call (see the module docstring).
+
+    Only measured rates decide: the current choice runs full chunks; the other one runs a
+    ``TRIAL_STEPS`` chunk when its retry time has come (or at once, when the current choice
+    has become slower than the other's last measurement), and takes over only if that
+    trial is faster."""
+
+    def __init__(self, n_disks: int, threads=None):
+        threads = _default if threads is None else threads
+        self.fixed = check_threads(threads) if threads is not None else None
+        self.max_threads = available_threads()
+        self.adaptive = self.fixed is None and n_disks >= SERIAL_BELOW and self.max_threads > 1
+        self.current = self.fixed or 1
+        self.rate = {}              # threads -> last measured particle-steps/s
+        self.retry_at = {}          # threads -> wall time of its next trial
+        self.retry_s = {}           # threads -> current retry interval [s]
+        self.trials = 0             # trial chunks run (reported by the bench)
+
+    def _other(self, k):
+        return self.max_threads if k == 1 else 1
+
+    def next(self, left: int):
+        """(threads, steps to run at most) for the next ``advance`` call."""
+        if not self.adaptive:
+            return self.current, left
+        for k in (1, self.max_threads):
+            if k not in self.rate:                      # measure both choices first
+                return k, min(left, TRIAL_STEPS)
+        other = self._other(self.current)
+        if time.perf_counter() >= self.retry_at.get(other, 0.0):
+            return other, min(left, TRIAL_STEPS)
+        return self.current, left
+
+    def record(self, threads: int, particle_steps: int, seconds: float):
+        """Rate of the chunk just run with ``threads`` threads."""
+        if not self.adaptive or particle_steps <= 0:
+            return
+        self.rate[threads] = particle_steps / max(seconds, 1e-9)
+        now = time.perf_counter()
+        if len(self.rate) < 2:
+            self.trials += 1
+            return
+        if threads != self.current:                        # a trial chunk
+            self.trials += 1
+            if self.rate[threads] > self.rate[self._other(threads)]:
+                self.current = threads
+                self.retry_s[self._other(threads)] = RETRY_S
+            else:                                          # it lost: wait longer next time
+                self.retry_s[threads] = min(2 * self.retry_s.get(threads, RETRY_S / 2),
+                                            RETRY_MAX_S)
+            other = self._other(self.current)
+            self.retry_at[other] = now + self.retry_s.setdefault(other, RETRY_S)
+        elif self.rate[threads] < self.rate[self._other(threads)]:
+            # the current choice got slower than the other's last measurement (the load
+            # changed): try the other one now rather than switch on an old figure
+            self.retry_at[self._other(threads)] = now

@@ -1,0 +1,239 @@
+"""What the hmodel and fem command lines share: one-line errors, checked option types, output
+folders and memory checked before any computation, Ctrl-C / SIGTERM as one line.
+
+The rule (both CLIs): every option is validated before anything is computed or written; a bad
+one gives one line ``error: ...`` naming the option and its allowed range on stderr and exit
+code 2, no traceback, nothing written. An interrupted run prints one line saying where it
+stopped and exits 130 (Ctrl-C) or 143 (SIGTERM); outputs already written stay complete (every
+file is written atomically or row by row).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import sys
+import tempfile
+import threading
+from contextlib import contextmanager
+
+__all__ = ["OptionError", "Parser", "real", "integer", "reals", "check_out_dir", "check_memory",
+           "param_option_error", "Stage", "run_cli", "announce_compilation"]
+
+
+class OptionError(ValueError):
+    """A command-line option out of range (the message names the option)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: raises OptionError instead of printing the usage and
+    exiting (``run_cli`` prints it as ``error: ...`` and returns 2)."""
+
+    def error(self, message):
+        raise OptionError(f"{message} (see {self.prog} --help)")
+
+
+def _interval(lo, hi, lo_open, hi_open):
+    """'value > 0', 'value <= 1', '0 < value <= 360' (None: no bound)."""
+    lt = lambda is_open: "<" if is_open else "<="
+    if hi is None:
+        return f"value {'>' if lo_open else '>='} {lo:g}" if lo is not None else "value"
+    if lo is None:
+        return f"value {lt(hi_open)} {hi:g}"
+    return f"{lo:g} {lt(lo_open)} value {lt(hi_open)} {hi:g}"
+
+
+def real(lo=None, hi=None, *, lo_open=True, hi_open=True, unit=""):
+    """argparse type: a finite float in the interval (lo, hi) (open or closed ends; None: no
+    bound), e.g. ``type=real(0, 360, hi_open=False, unit="deg")``."""
+    allowed = f"allowed a finite {_interval(lo, hi, lo_open, hi_open)}" + (f" [{unit}]" if unit else "")
+
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number: {allowed}") from None
+        ok = math.isfinite(v)
+        if ok and lo is not None:
+            ok = v > lo if lo_open else v >= lo
+        if ok and hi is not None:
+            ok = v < hi if hi_open else v <= hi
+        if not ok:
+            raise argparse.ArgumentTypeError(f"{text} is out of range: {allowed}")
+        return v
+
+    parse.__name__ = "real"
+    return parse
+
+
+def integer(lo=1, hi=None):
+    """argparse type: an integer lo <= value (<= hi)."""
+    allowed = f"allowed an integer {_interval(lo, hi, False, False)}"
+
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer: {allowed}") from None
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{text} is out of range: {allowed}")
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def reals(lo=None, hi=None, *, lo_open=True, hi_open=True, unit=""):
+    """argparse type: one or more comma-separated ``real`` values, as a list."""
+    one = real(lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
+
+    def parse(text):
+        vals = [one(x) for x in text.split(",") if x.strip()]
+        if not vals:
+            raise argparse.ArgumentTypeError(f"{text!r}: expected one or more comma-separated numbers")
+        return vals
+
+    parse.__name__ = "reals"
+    return parse
+
+
+def check_out_dir(path, option="--out"):
+    """Refuse an output folder that cannot be used, before any computation: an existing file,
+    or a folder (or, if it does not exist yet, its nearest existing parent) where no file can be
+    created. Nothing is left behind (the probe file is removed)."""
+    p = os.path.abspath(os.fspath(path))
+    if os.path.exists(p) and not os.path.isdir(p):
+        raise OptionError(f"{option} {path}: is an existing file, not a folder: allowed a folder "
+                          "(existing or to be created)")
+    probe = p
+    while not os.path.exists(probe):
+        probe = os.path.dirname(probe)
+    if not os.path.isdir(probe):
+        raise OptionError(f"{option} {path}: {probe} is a file, so the folder cannot be created")
+    try:
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+    except OSError as e:
+        what = "folder" if probe == p else f"parent folder {probe}"
+        raise OptionError(f"{option} {path}: the {what} is not writable ({e.strerror}): allowed a "
+                          "writable folder") from None
+
+
+def _available_bytes():
+    """MemAvailable of /proc/meminfo [bytes] (physical pages available elsewhere), or None."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(nbytes, what, options, allowed="a smaller run"):
+    """Refuse a run whose estimated memory ``nbytes`` exceeds the memory available now, naming
+    the options that set it (``options``, e.g. "--eps1-max / --d-eps1"), the estimate and what
+    is ``allowed`` instead."""
+    avail = _available_bytes()
+    if avail is not None and nbytes > avail:
+        raise OptionError(f"{options}: {what} would need about {nbytes / 1e9:.3g} GB of memory, "
+                          f"{avail / 1e9:.3g} GB available: allowed {allowed}")
+
+
+def param_option_error(e, option_of=None):
+    """The OptionError of an HParams ``ParamError`` ``e``, naming the command-line option of the
+    field (``--phi-g`` for phi_g, ``--sigma2`` for p0, or ``option_of[field]``)."""
+    opts = {"p0": "--sigma2", **(option_of or {})}
+    opt = opts.get(e.name, "--" + e.name.replace("_", "-"))
+    return OptionError(f"{opt} {e.value!r} is out of range: allowed {e.allowed}")
+
+
+class Stage:
+    """Where a command is, for the line printed when it is interrupted: ``at(text)`` as it goes,
+    ``wrote(name)`` for every output file completed."""
+
+    def __init__(self, out_dir=None):
+        self.where = "start-up"
+        self.out_dir = out_dir
+        self.written = []
+
+    def at(self, text):
+        self.where = text
+
+    def wrote(self, *names):
+        self.written.extend(names)
+
+    def line(self, signame):
+        done = (f"complete in {self.out_dir}: {', '.join(self.written)}" if self.written
+                else "no output written yet")
+        return f"interrupted ({signame}) during {self.where}; {done}"
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread like KeyboardInterrupt for Ctrl-C."""
+
+
+@contextmanager
+def _sigterm_raises():
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Terminated()
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def run_cli(parser, argv, run, errors=(ValueError,)) -> int:
+    """Parse ``argv`` and call ``run(args, stage)`` -> exit code, with the rules of this module:
+    a parse error or one of ``errors`` -> one line ``error: ...``, exit 2; Ctrl-C -> 130,
+    SIGTERM -> 143, with ``stage.line(...)``."""
+    stage = Stage()
+    try:
+        args = parser.parse_args(argv)
+    except OptionError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    stage.out_dir = getattr(args, "out", None)
+    try:
+        with _sigterm_raises():
+            return run(args, stage)
+    except errors as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(stage.line("Ctrl-C"), file=sys.stderr)
+        return 130
+    except Terminated:
+        print(stage.line("SIGTERM"), file=sys.stderr)
+        return 143
+
+
+def announce_compilation(functions, stream=None):
+    """Print "compiling kernels, once: about a minute" once if some Numba function of
+    ``functions`` has no compiled code in this process and none in Numba's cache (the first run
+    after an install); returns True if it printed. The first call then compiles and caches them
+    (time the caller should keep out of its reported timings)."""
+    stream = sys.stderr if stream is None else stream
+    for f in functions:
+        if getattr(f, "signatures", None) or getattr(f, "targetoptions", {}).get("inline") == "always":
+            continue      # compiled in this process, or inlined into its callers (never cached alone)
+        try:      # Numba's on-disk index of this function: empty when missing or stale
+            cached = bool(f._cache._cache_file._load_index())
+        except Exception:
+            cached = True     # unknown: say nothing rather than something wrong
+        if not cached:
+            print("compiling kernels, once: about a minute (Numba caches them for later runs)",
+                  file=stream, flush=True)
+            return True
+    return False

@@ -1,0 +1,20 @@
+"""Interrupting a command line in a subprocess (the CLIs' Ctrl-C / SIGTERM tests)."""
+import signal
+import subprocess
+import sys
+
+
+def interrupt_after(argv, first, sig=signal.SIGTERM, timeout=60):
+    """Run ``python -m argv...``, send ``sig`` once a stderr line starts with ``first``;
+    returns (exit code, stderr lines printed after that line)."""
+    p = subprocess.Popen([sys.executable, "-m", *argv], stderr=subprocess.PIPE,
+                         stdout=subprocess.PIPE, text=True)
+    try:
+        for line in p.stderr:
+            if line.startswith(first):
+                break
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=timeout)
+    finally:
+        p.kill()
+    return p.returncode, err.strip().splitlines()

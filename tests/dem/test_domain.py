@@ -1,0 +1,99 @@
+"""`dem domain` end to end on a small sample: three states along the drained path, a reduced
+set of directions; CSV columns, figures, resume bit-identical, a two-worker dask cluster."""
+import csv
+import json
+
+import pytest
+
+from dem.domain import DOMAIN_COLUMNS
+from dem.probes import COLUMNS as PROBE_COLUMNS
+
+ALPHAS = ["0", "180", "240"]
+
+
+@pytest.fixture(scope="module")
+def biaxial_dir(tmp_path_factory):
+    from dem.__main__ import main
+    out = tmp_path_factory.mktemp("bx")
+    main(["biaxial", "--n", "300", "--seed", "1", "--rate", "0.05", "--eps-max", "0.02",
+          "--out", str(out), "--no-vtk", "--save-fractions", "0.8,0.9,0.97"])
+    return out
+
+
+def _domain(biaxial_dir, out, *extra):
+    from dem.__main__ import main
+    main(["domain", "--biaxial", str(biaxial_dir), "--out", str(out), "--directions",
+          ",".join(ALPHAS), "--workers", "1", "--no-hmodel", *extra])
+
+
+def _read(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_states_along_the_path_are_listed(biaxial_dir):
+    rows = _read(biaxial_dir / "states" / "states.csv")
+    assert [r["target"] for r in rows] == ["f=0.8", "f=0.9", "f=0.97"]
+    with open(biaxial_dir / "summary.json") as f:
+        peak = json.load(f)["eta_max"]
+    for r, f in zip(rows, (0.8, 0.9, 0.97)):
+        # the first recorded state at or above the target: within one CSV row of it
+        assert f * peak <= float(r["eta"]) < f * peak + 0.05
+        assert (biaxial_dir / "states" / r["file"]).exists()
+    assert not (biaxial_dir / "candidates").exists()
+
+
+def test_domain_end_to_end_resume_and_dask(biaxial_dir, tmp_path, monkeypatch):
+    out = tmp_path / "dom"
+    _domain(biaxial_dir, out)
+    rows = _read(out / "domain.csv")
+    assert list(rows[0].keys()) == DOMAIN_COLUMNS
+    assert len(rows) == 3
+    etas = [float(r["eta"]) for r in rows]
+    assert etas == sorted(etas)
+    for r in rows:
+        n = int(r["n_equilibrium"]) + int(r["n_failure"]) + int(r["n_undecided"])
+        assert r["reference"] != "equilibrium" or n == 3
+        assert 0.7 < float(r["eta_fraction"]) < 1.1
+    probes = _read(out / "domain_probes.csv")
+    assert list(probes[0].keys()) == ["state", "state_eta"] + PROBE_COLUMNS
+    assert {p["outcome"] for p in probes} <= {"equilibrium", "failure", "undecided"}
+    for name in ("fig_domain.png", "fig_domain_w2.png", "boundaries.json"):
+        assert (out / name).stat().st_size > 0
+    b = json.loads((out / "boundaries.json").read_text())
+    assert b["eta_peak"] > 0 and "eta_lim_low" in b
+    first = (out / "domain.csv").read_bytes()
+    first_probes = (out / "domain_probes.csv").read_bytes()
+
+    # resume: the last run of one state was lost; only that run is done again
+    import dem.probes as probes_mod
+    ck = out / "state_f0.900" / "probe_runs.jsonl"
+    lines = ck.read_text().splitlines()
+    ck.write_text("\n".join(lines[:-1]) + "\n")
+    calls = []
+    real = probes_mod._task
+    monkeypatch.setattr(probes_mod, "_task", lambda t: calls.append(t[1:3]) or real(t))
+    _domain(biaxial_dir, out, "--resume")
+    assert len(calls) == 1
+    assert (out / "domain.csv").read_bytes() == first
+    assert (out / "domain_probes.csv").read_bytes() == first_probes
+    monkeypatch.setattr(probes_mod, "_task", real)
+
+    # a resume against other states is refused (the references belong to their states)
+    from dem import io
+    st, meta = io.load_state(out / "state_f0.900" / "stateR.npz")
+    io.save_state(out / "state_f0.900" / "stateR.npz", st, meta=dict(meta, origin="other"))
+    with pytest.raises(SystemExit) as e:
+        _domain(biaxial_dir, out, "--resume")
+    assert e.value.code == 2
+
+    # the same rows on a two-worker dask cluster
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        out2 = tmp_path / "dask"
+        from dem.__main__ import main
+        main(["domain", "--biaxial", str(biaxial_dir), "--out", str(out2), "--directions",
+              ",".join(ALPHAS), "--scheduler", cluster.scheduler_address, "--no-hmodel"])
+    assert (out2 / "domain.csv").read_bytes() == first
+    assert (out2 / "domain_probes.csv").read_bytes() == first_probes

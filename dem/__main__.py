@@ -12,9 +12,49 @@ from .threads import available_threads
 
 
 def _params(a):
-    from .params import DemParams
-    return DemParams(n=a.n, seed=a.seed, damping=a.damping, dt_safety=a.dt_safety,
-                     friction_deg=a.friction)
+    """DemParams of a command: --params FILE (or the paper's set), then the options given."""
+    from .params import load_params, params_from_options
+    return params_from_options(a, load_params(a.params) if a.params else None)
+
+
+def _check_state_params(own, a):
+    """A state carries its parameters ``own``: refuse a --params file that differs (after the
+    --damping override of a sensitivity check, if any)."""
+    from .params import load_params
+    if not getattr(a, "params", None):
+        return
+    given = load_params(a.params)
+    if getattr(a, "damping", None) is not None:
+        given = given.replace(damping=a.damping)
+    if given != own:
+        diff = [k for k in own.to_dict() if own.to_dict()[k] != given.to_dict()[k]]
+        raise ValueError(f"--params {a.params} conflicts with the parameters the state carries "
+                         f"({', '.join(diff)}); allowed: the state's own, or no --params")
+
+
+def add_param_options(p, n_default=None):
+    """--params FILE and the main DemParams fields as options (None: from the file / defaults)."""
+    p.add_argument("--params", default=None, help="DemParams as JSON (python -m dem params --out FILE)")
+    p.add_argument("--n", type=opt.integer(1, 10_000_000), default=n_default,
+                   help="number of disks (default: the file's, or 12000)")
+    p.add_argument("--seed", type=opt.integer(0), default=None)
+    p.add_argument("--r-min", type=opt.real(0, 1), default=None, help="[m]")
+    p.add_argument("--r-max", type=opt.real(0, 1), default=None, help="[m]")
+    p.add_argument("--density", type=opt.real(0, 1e5), default=None, help="[kg/m^3]")
+    p.add_argument("--kn-over-d", type=opt.real(0, 1e13), default=None, help="kn / mean diameter [Pa]")
+    p.add_argument("--kt-over-kn", type=opt.real(0, 10), default=None)
+    p.add_argument("--friction", type=opt.real(0, 90, lo_open=False), default=None, help="[deg]")
+    p.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=None,
+                   help="Cundall damping")
+    p.add_argument("--dt-safety", type=opt.real(0, 0.5, hi_open=False), default=None)
+
+
+def cmd_params(a):
+    import json
+    from . import io
+    p = _params(a)
+    io.atomic_write_bytes(a.out, (json.dumps(p.to_dict(), indent=1) + "\n").encode())
+    print(f"params: {a.out}")
 
 
 def _directions(a):
@@ -67,6 +107,7 @@ def cmd_probes(a):
     state, meta = io.load_state(a.state)
     if a.damping is not None:
         state = state._replace(params=state.params.replace(damping=a.damping))
+    _check_state_params(state.params, a)
     os.makedirs(a.out, exist_ok=True)
     ck = os.path.join(a.out, "probe_runs.jsonl")
     if not a.resume and os.path.exists(ck):
@@ -102,6 +143,11 @@ def cmd_domain(a):
     _threads(a)
     t0 = time.time()
     states = [s for s in a.states.split(",") if s] if a.states else None
+    if a.params:
+        from .domain import load_states
+        todo, _ = load_states(a.biaxial, states)
+        for _, st, _ in todo:
+            _check_state_params(st.params, a)
     rows, b, _ = run_domain(a.biaxial, a.out, states=states, alphas=alphas, opts=opts,
                          workers=a.workers, scheduler=a.scheduler, resume=a.resume,
                          hmodel=not a.no_hmodel)
@@ -113,7 +159,7 @@ def cmd_domain(a):
 
 def cmd_bench(a):
     from .bench import bench
-    res = bench(n=a.n, steps=a.steps, seed=a.seed, cache_dir=a.cache, busy=a.busy_core,
+    res = bench(params=_params(a), steps=a.steps, cache_dir=a.cache, busy=a.busy_core,
                 rounds=a.rounds)
     for k, v in res.items():
         print(f"{k}: {v}")
@@ -126,7 +172,7 @@ def cmd_crosscheck(a):
     c, timings = run_crosscheck(a.out, full=a.full, n=a.n, seed=a.seed, rate=a.rate,
                                 workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
                                 dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
-                                dem_domain=a.dem_domain)
+                                dem_domain=a.dem_domain, dem_params=a.dem_params)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
@@ -136,17 +182,13 @@ def main(argv=None):
     sub = ap.add_subparsers(dest="cmd", required=True, parser_class=opt.Parser)
 
     b = sub.add_parser("biaxial", help="compact and run the drained biaxial test")
-    b.add_argument("--n", type=opt.integer(1, 10_000_000), default=12000)
-    b.add_argument("--seed", type=opt.integer(0), default=1)
+    add_param_options(b)
     b.add_argument("--out", required=True)
     b.add_argument("--rate", type=opt.real(0, 10), default=0.01, help="axial strain rate [1/s]")
     b.add_argument("--confining", type=opt.real(0, 1e9), default=200e3, help="[Pa]")
     b.add_argument("--eta-a", type=opt.real(0, 2), default=1.029,
                    help="eta = q/p of point A (p = (s1 + s2)/2)")
     b.add_argument("--eps-max", type=opt.real(0, 0.5), default=0.10)
-    b.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=0.15)
-    b.add_argument("--dt-safety", type=opt.real(0, 1), default=0.2)
-    b.add_argument("--friction", type=opt.real(0, 90, lo_open=False), default=35.0, help="[deg]")
     b.add_argument("--compaction-friction", type=opt.real(0, 90, lo_open=False), default=0.0,
                    help="[deg]")
     b.add_argument("--save-fractions", type=opt.reals(0, 1, hi_open=False),
@@ -199,6 +241,8 @@ def main(argv=None):
                     help="probe from the saved state as is (no stress-controlled relaxation)")
     p.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=None,
                     help="override the Cundall damping of the state (sensitivity check)")
+    p.add_argument("--params", default=None,
+                    help="DemParams file; refused unless it is the state's own (states carry theirs)")
     p.add_argument("--resume", action="store_true",
                     help="keep the runs already in DIR/probe_runs.jsonl (and DIR/stateR.npz) "
                         "and run only the missing ones")
@@ -208,6 +252,8 @@ def main(argv=None):
                        help="the DEM's bifurcation domain: directional analyses of the states "
                             "saved along a biaxial test")
     d.add_argument("--biaxial", required=True, help="output folder of `dem biaxial`")
+    d.add_argument("--params", default=None,
+                    help="DemParams file; refused unless it is the states' own")
     d.add_argument("--out", required=True)
     d.add_argument("--states", default=None,
                     help="comma-separated states (file names or targets of DIR/states/states.csv, "
@@ -218,10 +264,14 @@ def main(argv=None):
                     help="keep the references and probe runs already in the output folder")
     d.set_defaults(func=cmd_domain)
 
+    q = sub.add_parser("params", help="write a DemParams file (the paper's set, or the options given)")
+    add_param_options(q)
+    q.add_argument("--out", required=True, help="the JSON file to write")
+    q.set_defaults(func=cmd_params)
+
     c = sub.add_parser("bench", help="particle-steps/s on a dense confined sample")
-    c.add_argument("--n", type=opt.integer(2, 10_000_000), default=12000)
+    add_param_options(c)
     c.add_argument("--steps", type=opt.integer(1), default=2000)
-    c.add_argument("--seed", type=opt.integer(0), default=1)
     c.add_argument("--cache", default=os.path.join(os.path.expanduser("~"), ".cache", "dem"))
     c.add_argument("--rounds", type=opt.integer(1, 100), default=1, help="interleaved rounds")
     c.add_argument("--busy-core", action="store_true",
@@ -230,6 +280,8 @@ def main(argv=None):
 
     x = sub.add_parser("crosscheck", help="H-model, FE and DEM side by side (report.md + figures)")
     x.add_argument("--out", required=True)
+    x.add_argument("--dem-params", default=None,
+                    help="DemParams file of the DEM sample (default: the paper's stated set)")
     x.add_argument("--full", action="store_true", help="the paper's 12,000 disks at 0.01/s (see README for the time)")
     x.add_argument("--n", type=opt.integer(2, 10_000_000), default=None, help="DEM disks (default 1000, 12000 with --full)")
     x.add_argument("--seed", type=opt.integer(0), default=1)

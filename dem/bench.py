@@ -20,15 +20,22 @@ from .sample import compact
 from .threads import ThreadChooser, available_threads
 
 
-def confined_sample(n=12000, seed=1, cache_dir=None):
-    """Compacted sample (cached as npz in cache_dir if given)."""
-    path = os.path.join(cache_dir, f"bench_n{n}_s{seed}.npz") if cache_dir else None
+def confined_sample(n=12000, seed=1, cache_dir=None, params=None):
+    """Compacted sample of ``params`` (default: the paper's set with n disks and this seed),
+    cached as npz in cache_dir if given."""
+    params = params or DemParams(n=n, seed=seed)
+    tag = f"bench_n{params.n}_s{params.seed}"
+    if params != DemParams(n=params.n, seed=params.seed):
+        import hashlib
+        import json
+        tag += "_" + hashlib.sha256(json.dumps(params.to_dict(), sort_keys=True).encode()).hexdigest()[:10]
+    path = os.path.join(cache_dir, tag + ".npz") if cache_dir else None
     if path and os.path.exists(path):
         try:
             return io.load_state(path)[0]
         except ValueError:
             pass
-    sim, _ = compact(DemParams(n=n, seed=seed))
+    sim, _ = compact(params)
     st = sim.state()
     if path:
         io.save_state(path, st)
@@ -59,11 +66,12 @@ class busy_core:
         self.p.wait()
 
 
-def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3):
+def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3, params=None):
     """Medians over ``rounds`` interleaved rounds of particle-steps/s on one thread, on the
     default (auto) and on all threads, and their ratios to one thread; ``busy``: with a
-    busy-loop process beside the run."""
-    st = confined_sample(n, seed, cache_dir)
+    busy-loop process beside the run; ``params``: DemParams in place of (n, seed)."""
+    st = confined_sample(n, seed, cache_dir, params)
+    n = st.params.n
     nt = available_threads()
     variants = {"1_thread": 1, "auto": None, f"{nt}_threads": nt}
     got = {k: [] for k in variants}

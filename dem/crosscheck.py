@@ -93,7 +93,8 @@ def comparison_state(refs, norm, alphas):
 
 
 def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, threads=None,
-             alphas=None, max_steps=None, resume=False, domain=True, hmodel_boundary=None):
+             alphas=None, max_steps=None, resume=False, domain=True, hmodel_boundary=None,
+             params=None):
     """DEM: compaction, drained biaxial test with states saved along the path, their
     relaxation under stress control, and the directional analysis (default: the paper's 45
     directions, each twice) at the comparison state chosen by ``comparison_state``
@@ -104,6 +105,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     not depend on it); the relaxations and probes run one thread each in ``workers``
     processes.  ``resume``: keep what an interrupted run in ``out_dir`` finished (the biaxial
     test or its checkpoint, the relaxed references, the probe runs already on disk).
+    ``params``: DemParams of the sample (default: the paper's set); n and seed override it.
     """
     from . import io
     from .domain import run_domain
@@ -128,7 +130,8 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     else:
         # the states along the path; 1.0 (the peak, above what constant stress holds)
         # brackets eta_lim from above
-        res = run_biaxial(DemParams(n=n, seed=seed), bdir, rate=rate, eta_a=eta_a, vtk=False,
+        P = (params or DemParams()).replace(n=n, seed=seed)
+        res = run_biaxial(P, bdir, rate=rate, eta_a=eta_a, vtk=False,
                           resume=resume, save_fractions=SAVE_FRACTIONS + (1.0,),
                           save_etas=(ETA2_OF_P3,))
     opts = ProbeOptions() if max_steps is None else ProbeOptions(max_steps=int(max_steps))
@@ -574,7 +577,8 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
 
 def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None, skip_dem=False,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
-                   dem_max_steps=None, threads=None, resume=False, dem_domain=None):
+                   dem_max_steps=None, threads=None, resume=False, dem_domain=None,
+                   dem_params=None):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
@@ -582,11 +586,14 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     ``threads`` and ``resume``: see ``dem_part`` (the H-model and FE parts always rerun).
     ``dem_domain``: the DEM's directional analysis at every saved state (its bifurcation
     domain), default on except with ``full`` (there only at the comparison state: the
-    12,000-disk domain is ``python -m dem domain``'s job).
+    12,000-disk domain is ``python -m dem domain``'s job).  ``dem_params``: a DemParams file
+    for the DEM sample (default: the paper's stated set); the report names it.
     """
     from hmodel.io import atomic_open
 
+    from .params import DemParams, load_params
     from .probes import directions
+    P = load_params(dem_params) if dem_params else DemParams()
     os.makedirs(out_dir, exist_ok=True)
     dflt = DEFAULT_FULL if full else DEFAULT_SMALL
     n = dflt["n"] if n is None else int(n)
@@ -616,7 +623,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
         dem = dem_part(os.path.join(out_dir, "dem"), n=n, seed=seed, rate=rate, workers=workers,
                        alphas=dem_alphas, max_steps=dem_max_steps, threads=threads,
                        resume=resume, domain=(not full) if dem_domain is None else dem_domain,
-                       hmodel_boundary=hb)
+                       hmodel_boundary=hb, params=P)
         n_runs = 2 * sum(len(r) for r in dem["probes_by_state"].values())
         timings[f"DEM ({n} disks: compaction, biaxial, {len(dem['domain_rows'])} relaxations, "
                 f"{n_runs} probe runs)"] = time.time() - t
@@ -625,6 +632,9 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     c = conclusions(h, dem["probes"] if dem else None, fem, dem)
     figs = _figures(out_dir, h, dem, fem)
     config = {"full": full, "dem_n": n, "dem_seed": seed, "dem_rate": rate,
+              "dem_params": (os.path.abspath(dem_params) if dem_params else
+                             "the paper's stated set (kn/D 32 GPa, kt/kn 0.42, 35 deg)"),
+              "dem_params_values": P.replace(n=n, seed=seed).to_dict(),
               "dem_probe_max_steps": dem_max_steps, "fem_mesh": list(fem_mesh),
               "fem_n_dir": fem_n_dir, "dem_eta_a_reached": dem["eta_a_reached"] if dem else None}
     with atomic_open(os.path.join(out_dir, "conclusions.json")) as f:

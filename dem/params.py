@@ -134,3 +134,40 @@ class DemParams:
                              + (f"missing keys {missing}" if missing else "")
                              + f"; allowed: exactly {sorted(names)}")
         return cls(**d)
+
+
+# The command-line options of the main parameters: option -> field of DemParams
+OPTIONS = {"--n": "n", "--seed": "seed", "--r-min": "r_min", "--r-max": "r_max",
+           "--density": "density", "--kn-over-d": "kn_over_d", "--kt-over-kn": "kt_over_kn",
+           "--friction": "friction_deg", "--damping": "damping", "--dt-safety": "dt_safety"}
+
+
+def load_params(path) -> DemParams:
+    """DemParams from a parameter file (JSON of every field, as ``python -m dem params``
+    writes it); ValueError naming the file and what is wrong."""
+    import json
+    try:
+        with open(path) as f:
+            d = json.load(f)
+    except OSError as e:
+        raise ValueError(f"--params {path}: {e.strerror}") from None
+    except ValueError as e:
+        raise ValueError(f"--params {path}: not JSON ({e})") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"--params {path}: allowed a JSON object of the DemParams fields")
+    try:
+        return DemParams.from_dict(d)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"--params {path}: {e}") from None
+
+
+def params_from_options(a, base: DemParams | None = None) -> DemParams:
+    """The parameters of a command: ``base`` (a parameter file, or the defaults: the paper's
+    set), with every main-parameter option given on the command line (not None) on top."""
+    p = base if base is not None else DemParams()
+    kw = {f: getattr(a, o[2:].replace("-", "_")) for o, f in OPTIONS.items()
+          if getattr(a, o[2:].replace("-", "_"), None) is not None}
+    try:
+        return p.replace(**kw) if kw else p
+    except ValueError as e:
+        raise ValueError(f"{e} (from the options {', '.join(o for o, f in OPTIONS.items() if f in kw)})") from None

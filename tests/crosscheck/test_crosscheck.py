@@ -39,6 +39,9 @@ def test_outputs_written(xc):
     assert (pdir / "probe_histories.csv").stat().st_size > 0
     saved = json.loads((out / "conclusions.json").read_text())
     assert saved["conclusions"]["hmodel"]["cone_w2"] == c["hmodel"]["cone_w2"]
+    # the report says which DEM parameter set it ran
+    assert saved["config"]["dem_params"].startswith("the paper's stated set")
+    assert saved["config"]["dem_params_values"]["n"] == 300 and "dem_params" in rep
 
 
 def test_comparison_state_by_its_rule_and_every_probe_decided(xc):

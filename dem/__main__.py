@@ -215,7 +215,8 @@ def main(argv=None):
     po.add_argument("--unbalanced-tol", type=opt.real(0, 1), default=1e-4)
     po.add_argument("--stress-tol", type=opt.real(0), default=25.0, help="[Pa]")
     po.add_argument("--max-steps", type=opt.integer(1), default=400_000,
-                    help="cap of a probe run [steps]: undecided when reached")
+                    help="cap of a probe run [steps]: undecided when reached (about 20 "
+                         "windows: 400,000 at 1000 disks, 1,400,000 at 12,000)")
     po.add_argument("--strain-tol", type=opt.real(0, 1), default=0.01,
                     help="equilibrium: strain drift over the window / |de|")
     po.add_argument("--ke-tol", type=opt.real(0), default=1e-10,

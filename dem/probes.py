@@ -276,11 +276,16 @@ def read_checkpoint(path, state: State, opts: ProbeOptions) -> dict:
     """Finished probe runs of a checkpoint file (JSON lines, see ``run_probes``) that belong to
     this state and these options: {(alpha_sigma, sliding): result}. A line cut short by an
     interrupted write is dropped; runs of another state or other options are refused with a
-    ValueError rather than mixed in."""
+    ValueError rather than mixed in.  Only the cap may differ: a run is deterministic and the
+    cap only truncates it, so a run decided (equilibrium or failure) within the new cap is kept
+    and one left undecided at a smaller cap runs again."""
     if not os.path.exists(path):
         return {}
     want = _checkpoint_header(state, opts)
+    i_cap = ProbeOptions._fields.index("max_steps")
+    strip = lambda h: {**h, "options": [v for k, v in enumerate(h["options"]) if k != i_cap]}
     done = {}
+    old_cap = opts.max_steps
     with open(path) as f:
         lines = f.read().split("\n")
     for k, line in enumerate(lines):
@@ -289,12 +294,16 @@ def read_checkpoint(path, state: State, opts: ProbeOptions) -> dict:
         except ValueError:
             continue  # a torn last line of an interrupted run
         if k == 0 and "fingerprint" in rec:
-            if rec != want:
+            if strip(rec) != strip(want):
                 raise ValueError(f"probe checkpoint {path} belongs to another state or other "
                                  "probe options; remove it or choose another output directory")
+            old_cap = rec["options"][i_cap]
             continue
         if isinstance(rec, dict) and "alpha_sigma" in rec:
-            done[(float(rec["alpha_sigma"]), bool(rec["sliding"]))] = rec
+            decided = rec["outcome"] != "undecided"
+            if (decided and rec["steps"] <= opts.ramp_steps + opts.max_steps) or (
+                    not decided and old_cap == opts.max_steps):
+                done[(float(rec["alpha_sigma"]), bool(rec["sliding"]))] = rec
     return done
 
 

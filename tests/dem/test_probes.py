@@ -141,3 +141,24 @@ def test_probes_on_a_dask_cluster_equal_local_runs(reference):
         remote = run_probes(reference, alphas, scheduler=cluster.scheduler_address,
                             verbose=False)
     _same_rows(local, remote)           # where a probe ran does not change its result
+
+
+def test_checkpoint_with_another_cap_keeps_the_decided_runs(reference, tmp_path):
+    # a run is deterministic and the cap only truncates it: with a larger cap the decided runs
+    # are kept and only the undecided ones run again; with a smaller one, runs decided beyond it
+    # run again (and give undecided)
+    import json
+    import dem.probes as probes
+    ck = tmp_path / "runs.jsonl"
+    small = ProbeOptions(max_steps=40_000)     # these runs end at 43,000-48,000 steps
+    rows = probes.run_probes(reference, [45.0, 225.0], small, workers=1, verbose=False,
+                             checkpoint=str(ck))
+    recs = [json.loads(l) for l in ck.read_text().splitlines()[1:]]
+    kept = probes.read_checkpoint(str(ck), reference, small._replace(max_steps=400_000))
+    assert {r["outcome"] for r in recs} == {"equilibrium", "undecided"}     # both kinds
+    for r in recs:
+        key = (r["alpha_sigma"], r["sliding"])
+        assert (key in kept) == (r["outcome"] != "undecided")
+    assert probes.read_checkpoint(str(ck), reference, small._replace(max_steps=30_000)) == {}
+    with pytest.raises(ValueError, match="other"):
+        probes.read_checkpoint(str(ck), reference, small._replace(stress_tol=10.0))

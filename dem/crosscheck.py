@@ -546,6 +546,11 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
                 f"{b['lower_why']})" if b["lower_state"] else "no state with W2 <= 0 or a failure")
              + f"; strength under stress control eta_lim in [{b['eta_lim_low']:.4f}, "
              f"{b['eta_lim_high']:.4f}] (largest target held, smallest target failed).")
+        n_probed = sum(1 for r in dd["rows"] if r["probed"])
+        if n_probed < sum(1 for r in dd["rows"] if r["reference"] != "failure"):
+            s += (f" Only {n_probed} of the {len(dd['rows'])} saved states were probed (the others "
+                  "only relaxed), so that first state is an upper bound of the DEM's lower "
+                  "boundary; `python -m dem domain` probes every state.")
         if hb:
             s += (f" H-model: first W2 <= 0 at eta = {hb['eta_w2']:.4f} ({hb['eta_w2_fraction']:.3f} "
                   f"of its peak {hb['eta_peak']:.4f}), W2_sigma <= 0 at {hb['eta_w2sigma']:.4f}.")

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -50,7 +51,6 @@ def add_param_options(p, n_default=None):
 
 
 def cmd_params(a):
-    import json
     from . import io
     p = _params(a)
     io.atomic_write_bytes(a.out, (json.dumps(p.to_dict(), indent=1) + "\n").encode())
@@ -126,10 +126,8 @@ def cmd_probes(a):
     summary = {"state": os.path.abspath(a.state), "reference": ref, "n_disks": state.params.n,
                "sigma2": s2, "directions": len(rows), "outcomes": dict(cnt),
                "options": opts._asdict(), "wall_time": time.time() - t0}
-    from . import io as dio
-    import json
-    dio.atomic_write_bytes(os.path.join(a.out, "summary.json"),
-                           json.dumps(summary, indent=1, default=float).encode())
+    io.atomic_write_bytes(os.path.join(a.out, "summary.json"),
+                          json.dumps(summary, indent=1, default=float).encode())
     print(f"probes: {len(rows)} directions -> {os.path.join(a.out, 'probes.csv')}; "
           f"reference: {ref}; " + ", ".join(f"{cnt[k]} {k}" for k in ("equilibrium", "failure",
                                                                        "undecided"))

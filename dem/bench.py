@@ -7,6 +7,7 @@ are interleaved so that a change of the machine's load hits every variant alike.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -75,16 +76,10 @@ def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3, par
     nt = available_threads()
     variants = {"1_thread": 1, "auto": None, f"{nt}_threads": nt}
     got = {k: [] for k in variants}
-    ctx = busy_core() if busy else None
-    if ctx:
-        ctx.__enter__()
-    try:
+    with busy_core() if busy else contextlib.nullcontext():
         for _ in range(rounds):
             for k, th in variants.items():
                 got[k].append(_rate(st, steps, th))
-    finally:
-        if ctx:
-            ctx.__exit__(None, None, None)
     med = {k: float(np.median(v)) for k, v in got.items()}
     out = {"n": n, "steps": steps, "busy_core": bool(busy), "threads_available": nt}
     for k, v in med.items():

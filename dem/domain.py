@@ -241,6 +241,8 @@ def plot_domain(drows, by, todo, b, out_dir):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from hmodel.io import save_figure
     fig, ax = plt.subplots(figsize=(8, 4.8), constrained_layout=True)
     cmap = plt.get_cmap("viridis")
     for k, (name, st, _) in enumerate(todo):
@@ -269,7 +271,7 @@ def plot_domain(drows, by, todo, b, out_dir):
     ax.set_title(f"DEM directional analyses along the drained path ({n} disks)", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    _save(fig, os.path.join(out_dir, "fig_domain_w2.png"))
+    save_figure(fig, os.path.join(out_dir, "fig_domain_w2.png"), dpi=120)
 
     fig, axs = plt.subplots(1, 2, figsize=(10, 4.6), constrained_layout=True)
     for ax, frac in zip(axs, (False, True)):
@@ -308,12 +310,5 @@ def plot_domain(drows, by, todo, b, out_dir):
     fig.legend(loc="lower center", ncol=3, fontsize=7, frameon=False, bbox_to_anchor=(0.5, -0.12))
     fig.suptitle("Bifurcation domain at the confining pressure of the DEM sample: lower boundary "
                  "and plastic limit", fontsize=10)
-    _save(fig, os.path.join(out_dir, "fig_domain.png"))
+    save_figure(fig, os.path.join(out_dir, "fig_domain.png"), dpi=120)
 
-
-def _save(fig, path):
-    import matplotlib.pyplot as plt
-    tmp = os.path.join(os.path.dirname(path), ".tmp-" + os.path.basename(path))
-    fig.savefig(tmp, dpi=120, format="png", bbox_inches="tight")
-    plt.close(fig)
-    os.replace(tmp, path)

@@ -59,10 +59,6 @@ def set_default_threads(threads):
     _default = check_threads(threads)
 
 
-def default_threads():
-    return _default
-
-
 class ThreadChooser:
     """Chooses the thread count of each ``advance`` call (see the module docstring).
 

@@ -1,10 +1,14 @@
 """Benchmark of the dem kernel: particle-steps/s on a dense sample confined at 200 kPa.
 
 Calls dem.bench.bench (the same function as `python -m dem bench`) and compares with
+  * LAMMPS serial on this project's exact sample (same radii and positions, contact law,
+    masses, inertia, dt and skin; `dem.bench.write_lammps` writes its data file and input),
+    when `lmp` is on the PATH (Debian: apt-get install lammps), interleaved over --rounds;
+    goal (issue 11): one thread >= 4x LAMMPS serial at 12,000 disks;
   * a plain NumPy implementation of the same step (same sample, same contact law,
     vectorized over the pair list, np.add.at gather), measured in this process;
   * the YADE figure quoted in issue #3: 4e5 particle-steps/s (one core).
-Usage: python bench/bench_dem.py [--n 12000] [--steps 2000]
+Usage: python bench/bench_dem.py [--sizes 300,2000,12000] [--steps 2000] [--rounds 3]
 """
 import argparse
 import math
@@ -13,7 +17,7 @@ import time
 
 import numpy as np
 
-from dem.bench import bench, confined_sample
+from dem.bench import bench, bench_lammps, confined_sample
 from dem.simulation import Simulation
 
 YADE_REFERENCE = 4e5  # particle-steps/s, quoted in issue #3
@@ -82,6 +86,15 @@ def main():
             print(f"{n:>6} {'yes' if busy else 'no':>9} {one:11.3e} {auto:11.3e} {allt:11.3e} "
                   f"{auto / one:7.2f} {allt / one:7.2f}", flush=True)
     print(f"worst auto / 1 thread: {worst:.2f} (goal: >= 1/1.2 = 0.83)")
+    lmp = bench_lammps(a.baseline_n, a.steps, cache_dir=a.cache, rounds=a.rounds)
+    if lmp is None:
+        print("LAMMPS: lmp not on the PATH (apt-get install lammps): comparison skipped")
+    else:
+        print(f"LAMMPS serial ({lmp['lammps']}, n={lmp['n']}, {lmp['steps']} steps, "
+              f"medians of {a.rounds} interleaved rounds): {lmp['lammps_atom_steps_per_s']:.3e} "
+              f"atom-steps/s; this project on 1 thread {lmp['particle_steps_per_s_1_thread']:.3e}: "
+              f"{lmp['ratio_1_thread_to_lammps']:.2f}x (goal >= 4x); "
+              f"load {os.getloadavg()[0]:.2f}", flush=True)
     st = confined_sample(a.baseline_n, 1, a.cache)
     base = numpy_baseline(st, max(20, a.steps // 20))
     one = bench(a.baseline_n, a.steps, cache_dir=a.cache, rounds=1)["particle_steps_per_s_1_thread"]

@@ -2,12 +2,15 @@
 temporary file in the target directory and is moved in place with os.replace, so an
 interrupted run never leaves a half-written file under the final name.
 
-State file format (npz, FORMAT_VERSION = 1), arrays:
+State file format (npz, FORMAT_VERSION = 2), arrays:
   format ("dem-state"), format_version (int), params (JSON of DemParams),
   x, v (N,2), w, theta, r (N,), walls, walls_ref, prev (4,), x_ref (N,2),
-  pi, pj (P,) int32, ft (P,), step, time, mu, cap_on,
+  pi, pj (P,) int32, ft (P,), mr (P,) rolling-moment history, step, time, mu, mu_r, cap_on,
   ctrl_mode (2,), ctrl_s_from, ctrl_s_to (2,), ctrl_ramp (2,) [start, len], ctrl_rate,
   ctrl_len0 (2,), ref_len (2,), meta (JSON, free-form).
+Version 1 (before rolling resistance) is still read: no mr, mu_r, and params without
+rolling_friction / rolling_stiffness; it loads as a state without rolling resistance
+(rolling_friction 0, rolling_stiffness its default, mr and mu_r zero), which is what it was.
 """
 from __future__ import annotations
 
@@ -25,7 +28,10 @@ from .simulation import State, Simulation
 from .walls import Control
 
 FORMAT = "dem-state"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READ_VERSIONS = (1, 2)
+# what a version-1 file's params lacked: the values its runs had
+V1_PARAMS = {"rolling_friction": 0.0, "rolling_stiffness": 1.0}
 
 
 def _umask():
@@ -60,8 +66,9 @@ def save_state(path, state: State, meta: dict | None = None):
              params=np.array(json.dumps(state.params.to_dict())),
              x=state.x, v=state.v, w=state.w, theta=state.theta, r=state.r,
              walls=state.walls, walls_ref=state.walls_ref, prev=state.prev, x_ref=state.x_ref,
-             pi=state.pi, pj=state.pj, ft=state.ft, step=np.array(state.step),
-             time=np.array(state.time), mu=np.array(state.mu), cap_on=np.array(state.cap_on),
+             pi=state.pi, pj=state.pj, ft=state.ft, mr=state.mr, step=np.array(state.step),
+             time=np.array(state.time), mu=np.array(state.mu), mu_r=np.array(state.mu_r),
+             cap_on=np.array(state.cap_on),
              ctrl_mode=np.asarray(c.mode, np.int64), ctrl_s_from=np.asarray(c.s_from, float),
              ctrl_s_to=np.asarray(c.s_to, float),
              ctrl_ramp=np.array([c.ramp_start, c.ramp_len], np.int64),
@@ -78,7 +85,7 @@ _KEYS = ["format", "format_version", "params", "x", "v", "w", "theta", "r", "wal
 
 def load_state(path) -> tuple[State, dict]:
     """Read a state file.  ValueError if it is missing, truncated, not a DEM state, or of
-    another format version (allowed: FORMAT_VERSION)."""
+    another format version (allowed: READ_VERSIONS)."""
     if not os.path.isfile(path):
         raise ValueError(f"state file {path}: no such file")
     try:
@@ -96,15 +103,24 @@ def load_state(path) -> tuple[State, dict]:
     if str(d["format"]) != FORMAT:
         raise ValueError(f"state file {path}: format={str(d['format'])!r}; allowed: {FORMAT!r}")
     ver = int(d["format_version"])
-    if ver != FORMAT_VERSION:
+    if ver not in READ_VERSIONS:
         raise ValueError(f"state file {path}: format_version={ver}; allowed range: "
-                         f"format_version == {FORMAT_VERSION}")
-    params = DemParams.from_dict(json.loads(str(d["params"])))
+                         f"format_version in {READ_VERSIONS}")
+    pd = json.loads(str(d["params"]))
+    if ver == 1:
+        if any(k in pd for k in V1_PARAMS):
+            raise ValueError(f"state file {path}: format_version=1 with rolling parameters")
+        pd.update(V1_PARAMS)
+        d["mr"] = np.zeros(len(d["ft"]))
+        d["mu_r"] = np.array(0.0)
+    elif "mr" not in d or "mu_r" not in d:
+        raise ValueError(f"state file {path}: not a DEM state (missing ['mr', 'mu_r'])")
+    params = DemParams.from_dict(pd)
     n = len(d["r"])
     for k in ("x", "v", "x_ref"):
         if d[k].shape != (n, 2):
             raise ValueError(f"state file {path}: {k} has shape {d[k].shape}, expected ({n}, 2)")
-    if not (len(d["pi"]) == len(d["pj"]) == len(d["ft"])):
+    if not (len(d["pi"]) == len(d["pj"]) == len(d["ft"]) == len(d["mr"])):
         raise ValueError(f"state file {path}: inconsistent pair list lengths")
     ctrl = Control(tuple(int(a) for a in d["ctrl_mode"]), tuple(map(float, d["ctrl_s_from"])),
                    tuple(map(float, d["ctrl_s_to"])), int(d["ctrl_ramp"][0]),
@@ -112,7 +128,8 @@ def load_state(path) -> tuple[State, dict]:
                    tuple(map(float, d["ctrl_len0"])))
     st = State(params, d["x"], d["v"], d["w"], d["theta"], d["r"], d["walls"], d["walls_ref"],
                d["prev"], d["x_ref"], d["pi"].astype(np.int32), d["pj"].astype(np.int32),
-               d["ft"], int(d["step"]), float(d["time"]), float(d["mu"]), bool(d["cap_on"]),
+               d["ft"], d["mr"], int(d["step"]), float(d["time"]), float(d["mu"]),
+               float(d["mu_r"]), bool(d["cap_on"]),
                ctrl, d["ref_len"])
     meta = json.loads(str(d["meta"])) if "meta" in d else {}
     return st, meta

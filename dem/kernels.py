@@ -5,18 +5,29 @@ Kernels take only arrays and scalars.  Conventions (2D, thickness t):
   r (N,) radii [m], m (N,) masses [kg], inertia (N,) [kg m^2].
   Pair list: pi, pj (P,) int32 with pi < pj, sorted by (pi, pj); ft (P,) tangential
   force history [N] expressed in the contact frame (t = z x n), which in 2D *is*
-  the history rotated with the contact.
+  the history rotated with the contact; mr (P,) rolling-moment history [N m] (moment on
+  pi; zero without rolling resistance).
   Force convention: force exerted on pi by pj.  n = (x_j - x_i)/|.|.
   Walls: walls (4,) = [x_left, x_right, y_bottom, y_top] [m]; frictionless.
 
 Determinism: the disks are split into contiguous blocks, one per thread; every disk sums
 its contact forces in increasing pair index whatever the split (``_block_step``), so
 results do not depend on the number of threads, to the bit.
+
+Speed (issue 11; ``bench/bench_dem.py``), with the arithmetic of every force unchanged to the
+bit: indices into the per-disk arrays are unsigned in the step loops (numba then skips its
+negative-index test: +23 % on one thread), the contact law is branch-free (+7 %), and the step
+kernels use ``error_model="numpy"`` (no zero-division test; a contact at zero distance is
+impossible with positive radii: +4 %).
 """
 import math
 
 import numpy as np
 from numba import njit, prange
+
+U = np.uint64   # unsigned index: numba skips the negative-index wraparound test for it
+FAST = dict(cache=True, error_model="numpy")   # the step kernels' compile options
+
 
 
 # --------------------------------------------------------------------------------------
@@ -123,18 +134,21 @@ def row_offsets(pi, n):
 
 
 @njit(cache=True, parallel=True)
-def carry_history(old_pi, old_pj, old_ft, new_pi, new_pj, n):
-    """Tangential history of the new pair list, copied from the old one for pairs in both."""
+def carry_history(old_pi, old_pj, old_ft, old_mr, new_pi, new_pj, n):
+    """Tangential and rolling histories (ft, mr) of the new pair list, copied from the old one
+    for pairs in both (zero for new pairs)."""
     off = row_offsets(old_pi, n)
     ft = np.zeros(new_pi.shape[0])
+    mr = np.zeros(new_pi.shape[0])
     for k in prange(new_pi.shape[0]):
         i = new_pi[k]
         j = new_pj[k]
         for a in range(off[i], off[i + 1]):
             if old_pj[a] == j:
                 ft[k] = old_ft[a]
+                mr[k] = old_mr[a]
                 break
-    return ft
+    return ft, mr
 
 
 @njit(cache=True)
@@ -169,12 +183,14 @@ def wall_candidates(x, r, walls, skin):
 # --------------------------------------------------------------------------------------
 # Contact law
 # --------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(**FAST)
 def _contact_law(dx, dy, rs, dvx, dvy, wr, ft_old, meff, kn, kt, mu, cap_on, beta, dt):
     """Linear spring contact law with incremental tangential spring and Coulomb cap, for one
     pair of disks i, j.  Scalars only: an array passed to a function called in a hot loop
     costs reference counting at every call (it halved the speed of the pair loop), scalars
-    let the compiler inline it for free.
+    let the compiler inline it for free.  Branch-free: the forces of a pair that does not
+    touch are computed and then zeroed (a quarter of the pairs of a dense sample are only
+    within the skin, and a mispredicted branch cost more than the arithmetic).
 
     dx, dy = x_j - x_i [m]; rs = r_i + r_j [m]; dvx, dvy = v_j - v_i [m/s];
     wr = w_i r_i + w_j r_j [m/s]; ft_old: tangential history [N]; meff: reduced mass [kg]
@@ -184,31 +200,54 @@ def _contact_law(dx, dy, rs, dvx, dvy, wr, ft_old, meff, kn, kt, mu, cap_on, bet
     Returns (touching, fx, fy, f_t): the force [N] on i by j and its tangential component,
     the new history (0 when the disks do not touch: cohesionless, the history is lost).
     """
-    d2 = dx * dx + dy * dy
-    if d2 >= rs * rs:
-        return False, 0.0, 0.0, 0.0
-    d = math.sqrt(d2)
-    nx = dx / d
-    ny = dy / d
+    touch, nx, ny, fn = _normal_force(dx, dy, rs, dvx, dvy, meff, kn, beta)
     tx = -ny
     ty = nx
-    fn = kn * (rs - d)
-    if beta > 0.0:
-        fn -= 2.0 * beta * math.sqrt(kn * meff) * (dvx * nx + dvy * ny)
-        if fn < 0.0:
-            fn = 0.0
     vt = dvx * tx + dvy * ty - wr
     f_t = ft_old + kt * vt * dt
     if cap_on:
         lim = mu * fn
-        if f_t > lim:
-            f_t = lim
-        elif f_t < -lim:
-            f_t = -lim
-    return True, -fn * nx + f_t * tx, -fn * ny + f_t * ty, f_t
+        f_t = min(max(f_t, -lim), lim)
+    fx = -fn * nx + f_t * tx
+    fy = -fn * ny + f_t * ty
+    return touch, fx if touch else 0.0, fy if touch else 0.0, f_t if touch else 0.0
 
 
-@njit(cache=True)
+@njit(**FAST)
+def _normal_force(dx, dy, rs, dvx, dvy, meff, kn, beta):
+    """(touching, nx, ny, fn) of a pair: the unit normal from i to j and the normal force
+    [N] (meaningless when not touching: the caller zeroes what it uses)."""
+    d2 = dx * dx + dy * dy
+    touch = d2 < rs * rs
+    d = math.sqrt(d2)
+    nx = dx / d
+    ny = dy / d
+    fn = kn * (rs - d)
+    if beta > 0.0:
+        fn -= 2.0 * beta * math.sqrt(kn * meff) * (dvx * nx + dvy * ny)
+        fn = max(fn, 0.0)
+    return touch, nx, ny, fn
+
+
+@njit(**FAST)
+def _rolling_moment(dx, dy, rs, dvx, dvy, meff, kn, beta, dw, mr_old, ri, rj, kr, mur,
+                    cap_on, dt):
+    """Elastic-plastic rolling resistance (Iwashita & Oda 1998; Ai et al. 2011 type C without
+    the viscous part): the rolling moment on i [N m] after a step of relative rotation
+    dw * dt, dw = w_i - w_j [rad/s]; stiffness k_r = kr R*^2 (kr = rolling_stiffness * kt
+    [N/m]), capped at mu_r R* fn when cap_on, R* = r_i r_j / (r_i + r_j); 0 when the disks do
+    not touch.  Disk j receives the opposite moment.  The normal force is the contact law's
+    (``_normal_force``, same arguments)."""
+    touch, _, _, fn = _normal_force(dx, dy, rs, dvx, dvy, meff, kn, beta)
+    rstar = ri * rj / (ri + rj)
+    m = mr_old - kr * rstar * rstar * dw * dt
+    if cap_on:
+        lim = mur * rstar * fn
+        m = min(max(m, -lim), lim)
+    return m if touch else 0.0
+
+
+@njit(**FAST)
 def wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK):
     """Frictionless linear walls.  Resets fext of candidates, then adds wall forces.
 
@@ -242,7 +281,7 @@ def wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK):
 # --------------------------------------------------------------------------------------
 # Wall control (YADE TriaxialStressController-like servo)
 # --------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(**FAST)
 def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thickness,
                 gain, smoothing, vmax, dt):
     """Move the walls for one step.
@@ -343,10 +382,11 @@ def cross_pairs(pj, bounds, kbounds):
     return cross_k, ci_off, cj_cnt, cj_idx
 
 
-@njit(cache=True, parallel=True)
-def cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, kn, kt, mu, cap_on, beta, dt, cf, con):
-    """Contact law of the cross pairs (between blocks), before the blocks run: cf (C,3)
-    receives (fx, fy, f_t), con (C,) whether the disks touch."""
+@njit(cache=True, parallel=True, error_model="numpy")
+def cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, mr, kn, kt, mu, cap_on, beta, kr, mur,
+                 dt, cf, con):
+    """Contact law of the cross pairs (between blocks), before the blocks run: cf (C,4)
+    receives (fx, fy, f_t, rolling moment on i), con (C,) whether the disks touch."""
     for c in prange(cross_k.shape[0]):
         k = cross_k[c]
         i = pi[k]
@@ -361,15 +401,21 @@ def cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, kn, kt, mu, cap_on, beta, d
         cf[c, 0] = fx
         cf[c, 1] = fy
         cf[c, 2] = f_t
+        cf[c, 3] = 0.0
+        if mur > 0.0:
+            mr[k] = _rolling_moment(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], r[i] + r[j],
+                                    v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], meff, kn, beta,
+                                    w[i] - w[j], mr[k], r[i], r[j], kr, mur, cap_on, dt)
+            cf[c, 3] = mr[k]
 
 
-@njit(cache=True)
+@njit(**FAST)
 def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
-                x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref, disp2,
-                kn, kt, mu, cap_on, beta, damping, dt):
-    """One time step of the disks of block b: contact forces summed into fnet (N,3) =
-    (fx, fy, torque), Cundall damping, leapfrog.  Returns the largest squared displacement
-    since the last rebuild in the block [m^2].
+                x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref, disp2,
+                kn, kt, mu, cap_on, beta, kr, mur, damping, dt):
+    """One time step of the disks of block b: contact forces summed into fnet (N,4) =
+    (fx, fy, sum of tangential forces -> torque, rolling moments), Cundall damping, leapfrog.
+    Returns the largest squared displacement since the last rebuild in the block [m^2].
 
     Each contact force is added straight into the net force of its two disks, in increasing
     pair index for every disk, starting from the wall force fext; a - b equals a + (-1) b
@@ -378,14 +424,21 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
     pairs of earlier blocks come first (their pair indices are lower than any pair this block
     heads); those of the cross pairs this block heads come in their place.  A block writes
     only its own disks and reads others' positions only through cross pairs, computed
-    before, so blocks run concurrently.
+    before, so blocks run concurrently.  Rolling resistance (mur > 0) is a second pass over
+    the same pairs, summing the moments into column 3 in the same order; without it neither
+    that pass nor that column is touched, and the force loop carries no rolling code (it
+    cost 15 % of its speed inside it).
     """
+    rolling = mur > 0.0
     p0 = bounds[b]
     p1 = bounds[b + 1]
-    for p in range(p0, p1):
+    for pp in range(p0, p1):
+        p = U(pp)
         fnet[p, 0] = fext[p, 0]
         fnet[p, 1] = fext[p, 1]
         fnet[p, 2] = 0.0
+        if rolling:
+            fnet[p, 3] = 0.0
     for e in range(cj_off[b], cj_off[b + 1]):
         c = cj_idx[e]
         if con[c]:
@@ -393,11 +446,14 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
             fnet[j, 0] -= cf[c, 0]
             fnet[j, 1] -= cf[c, 1]
             fnet[j, 2] += cf[c, 2]
+            if rolling:
+                fnet[j, 3] -= cf[c, 3]
     c = ci_off[b]
-    for k in range(kbounds[b], kbounds[b + 1]):
-        i = pi[k]
-        j = pj[k]
-        if j >= p1:
+    for kk in range(kbounds[b], kbounds[b + 1]):
+        k = U(kk)
+        i = U(pi[k])
+        j = U(pj[k])
+        if pj[k] >= p1:
             # cross pair: force computed before; this block adds the share of its disk i
             if con[c]:
                 fnet[i, 0] += cf[c, 0]
@@ -411,18 +467,38 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
                                           w[i] * r[i] + w[j] * r[j], ft[k], meff,
                                           kn, kt, mu, cap_on, beta, dt)
         ft[k] = f_t
-        if touch:
-            fnet[i, 0] += fx
-            fnet[i, 1] += fy
-            fnet[i, 2] += f_t
-            fnet[j, 0] -= fx
-            fnet[j, 1] -= fy
-            fnet[j, 2] += f_t
+        fnet[i, 0] += fx
+        fnet[i, 1] += fy
+        fnet[i, 2] += f_t
+        fnet[j, 0] -= fx
+        fnet[j, 1] -= fy
+        fnet[j, 2] += f_t
+    if rolling:
+        c = ci_off[b]
+        for kk in range(kbounds[b], kbounds[b + 1]):
+            k = U(kk)
+            i = U(pi[k])
+            j = U(pj[k])
+            if pj[k] >= p1:
+                if con[c]:
+                    fnet[i, 3] += cf[c, 3]
+                c += 1
+                continue
+            meff = m[i] * m[j] / (m[i] + m[j]) if beta > 0.0 else 0.0
+            mk = _rolling_moment(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], r[i] + r[j],
+                                 v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], meff, kn, beta,
+                                 w[i] - w[j], mr[k], r[i], r[j], kr, mur, cap_on, dt)
+            mr[k] = mk
+            fnet[i, 3] += mk
+            fnet[j, 3] -= mk
     dmax = 0.0
-    for p in range(p0, p1):
+    for pp in range(p0, p1):
+        p = U(pp)
         fx = fnet[p, 0]
         fy = fnet[p, 1]
         tq = fnet[p, 2] * r[p]
+        if rolling:
+            tq += fnet[p, 3]
         fnet[p, 2] = tq
         if damping > 0.0:
             # Cundall non-viscous damping per component: F <- F - lambda |F| sign(v)
@@ -444,38 +520,39 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
     return dmax
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def blocks_step(bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
-                x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref, disp2,
-                kn, kt, mu, cap_on, beta, damping, dt, dmax):
+                x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref, disp2,
+                kn, kt, mu, cap_on, beta, kr, mur, damping, dt, dmax):
     """``_block_step`` of every block, blocks spread over threads; dmax (nblocks,)."""
     for b in prange(bounds.shape[0] - 1):
         dmax[b] = _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
-                              x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref,
-                              disp2, kn, kt, mu, cap_on, beta, damping, dt)
+                              x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref,
+                              disp2, kn, kt, mu, cap_on, beta, kr, mur, damping, dt)
 
 
 # --------------------------------------------------------------------------------------
 # Driver: many steps in one call
 # --------------------------------------------------------------------------------------
-@njit(cache=True)
-def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, cand_off, cand, fext, fnet,
+@njit(**FAST)
+def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, cand, fext, fnet,
             x_ref, walls_ref, disp2, walls, prev, wF, wK,
             mode, s_from, s_to, ramp_start, ramp_len, rate, len0, step0,
-            kn, kt, mu, cap_on, beta, damping, dt, thickness, gain, smoothing, vmax, half_skin,
-            nblocks):
+            kn, kt, mu, cap_on, beta, kr, mur, damping, dt, thickness, gain, smoothing, vmax,
+            half_skin, nblocks):
     """Run up to nsteps time steps; stop early when the neighbour list must be rebuilt.
 
     Returns the number of steps done.  step0 is the global step counter at entry (the
     stress ramp of the servo is a function of it, so a chunked run equals a single run).
     ``nblocks``: blocks of disks run concurrently (one per thread; results do not depend on
-    it, see ``_block_step``).  One block is the plain serial loop.
+    it, see ``_block_step``).  One block is the plain serial loop.  Rolling resistance:
+    kr = rolling_stiffness * kt [N/m], mur = current rolling friction (0 = off); fnet (N,4).
     """
     hs2 = half_skin * half_skin
     n = x.shape[0]
     bounds, kbounds = block_partition(pi, n, nblocks)
     cross_k, ci_off, cj_off, cj_idx = cross_pairs(pj, bounds, kbounds)
-    cf = np.empty((cross_k.shape[0], 3))
+    cf = np.empty((cross_k.shape[0], 4))
     con = np.empty(cross_k.shape[0], np.bool_)
     dmax = np.zeros(nblocks)
     done = 0
@@ -483,13 +560,14 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, cand_off, cand, f
         wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
         if nblocks == 1:
             dmax[0] = _block_step(0, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
-                                  x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref,
-                                  disp2, kn, kt, mu, cap_on, beta, damping, dt)
+                                  x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet,
+                                  x_ref, disp2, kn, kt, mu, cap_on, beta, kr, mur, damping, dt)
         else:
-            cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, kn, kt, mu, cap_on, beta, dt, cf, con)
+            cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, mr, kn, kt, mu, cap_on, beta, kr,
+                         mur, dt, cf, con)
             blocks_step(bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
-                        x, v, w, theta, r, m, inertia, pi, pj, ft, fext, fnet, x_ref, disp2,
-                        kn, kt, mu, cap_on, beta, damping, dt, dmax)
+                        x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref, disp2,
+                        kn, kt, mu, cap_on, beta, kr, mur, damping, dt, dmax)
         gstep = step0 + s
         if ramp_len > 0:
             rt = (gstep - ramp_start + 1) / ramp_len

@@ -13,19 +13,22 @@ from . import kernels
 
 
 class PairList(NamedTuple):
-    """pi, pj (P,) int32 with pi < pj sorted; ft (P,) tangential history [N];
-    cand_off (5,), cand wall candidates."""
+    """pi, pj (P,) int32 with pi < pj sorted; ft (P,) tangential history [N]; mr (P,)
+    rolling-moment history [N m]; cand_off (5,), cand wall candidates."""
     pi: np.ndarray
     pj: np.ndarray
     ft: np.ndarray
+    mr: np.ndarray
     cand_off: np.ndarray
     cand: np.ndarray
 
 
-def build_pair_list(x, r, walls, skin, old_pi=None, old_pj=None, old_ft=None) -> PairList:
+def build_pair_list(x, r, walls, skin, old_pi=None, old_pj=None, old_ft=None,
+                    old_mr=None) -> PairList:
     """Build the pair list for positions x (N,2) [m], radii r (N,) [m], box walls (4,).
 
-    If an old list is given, the tangential history of pairs present in both is kept.
+    If an old list is given, the tangential and rolling histories of pairs present in both
+    are kept.
     """
     n = x.shape[0]
     cell = 2.0 * float(r.max()) + skin
@@ -41,16 +44,18 @@ def build_pair_list(x, r, walls, skin, old_pi=None, old_pj=None, old_ft=None) ->
     ncy = max(1, int((hi_y - lo_y) / cell) + 1)
     pi, pj = kernels.build_pairs(x, r, skin, lo_x, lo_y, cell, ncx, ncy)
     if old_pi is not None and len(old_pi):
-        ft = kernels.carry_history(old_pi, old_pj, old_ft, pi, pj, n)
+        if old_mr is None:
+            old_mr = np.zeros(len(old_pi))
+        ft, mr = kernels.carry_history(old_pi, old_pj, old_ft, old_mr, pi, pj, n)
     else:
-        ft = np.zeros(len(pi))
-    return finish_pair_list(x, r, walls, skin, pi, pj, ft)
+        ft, mr = np.zeros(len(pi)), np.zeros(len(pi))
+    return finish_pair_list(x, r, walls, skin, pi, pj, ft, mr)
 
 
-def finish_pair_list(x, r, walls, skin, pi, pj, ft) -> PairList:
+def finish_pair_list(x, r, walls, skin, pi, pj, ft, mr) -> PairList:
     """Wall-candidate lists for a given pair list (deterministic)."""
     cand_off, cand = kernels.wall_candidates(x, r, np.asarray(walls, float), skin)
-    return PairList(pi, pj, ft, cand_off, cand)
+    return PairList(pi, pj, ft, mr, cand_off, cand)
 
 
 def brute_force_pairs(x, r, skin):

@@ -11,6 +11,10 @@ import math
 from dataclasses import dataclass, fields, asdict
 
 
+def _real(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def _check(name, value, ok, allowed):
     if not ok:
         raise ValueError(f"{name}={value!r} is invalid; allowed range: {allowed}")
@@ -37,6 +41,11 @@ class DemParams:
       servo_smoothing        weight of the new wall displacement in the smoothed one [-]
       servo_vmax             cap on the wall speed under stress control [m/s]
       seed                   seed of the sample generator
+      rolling_friction       mu_r: the rolling moment of a contact is capped at mu_r R* fn,
+                             R* = r_i r_j / (r_i + r_j) [-]; 0 = no rolling resistance (the
+                             paper's DEM: free rotation)
+      rolling_stiffness      k_r = rolling_stiffness * kt * R*^2 [-] (Iwashita & Oda 1998;
+                             1 is LIGGGHTS' EPSD2 choice); used only when rolling_friction > 0
     """
 
     n: int = 12000
@@ -55,6 +64,8 @@ class DemParams:
     servo_smoothing: float = 0.5
     servo_vmax: float = 0.5
     seed: int = 1
+    rolling_friction: float = 0.0
+    rolling_stiffness: float = 1.0
 
     def __post_init__(self):
         _check("n", self.n, isinstance(self.n, (int,)) and self.n >= 1, "integer >= 1")
@@ -80,6 +91,12 @@ class DemParams:
                "0 < servo_smoothing <= 1")
         _check("servo_vmax", self.servo_vmax, self.servo_vmax > 0, "servo_vmax > 0 [m/s]")
         _check("seed", self.seed, isinstance(self.seed, int) and self.seed >= 0, "integer >= 0")
+        _check("rolling_friction", self.rolling_friction,
+               _real(self.rolling_friction) and 0 <= self.rolling_friction < math.inf,
+               "0 <= rolling_friction (0 = no rolling resistance)")
+        _check("rolling_stiffness", self.rolling_stiffness,
+               _real(self.rolling_stiffness) and 0 < self.rolling_stiffness < math.inf,
+               "rolling_stiffness > 0")
 
     # Derived quantities -------------------------------------------------------------
     @property
@@ -139,7 +156,8 @@ class DemParams:
 # The command-line options of the main parameters: option -> field of DemParams
 OPTIONS = {"--n": "n", "--seed": "seed", "--r-min": "r_min", "--r-max": "r_max",
            "--density": "density", "--kn-over-d": "kn_over_d", "--kt-over-kn": "kt_over_kn",
-           "--friction": "friction_deg", "--damping": "damping", "--dt-safety": "dt_safety"}
+           "--friction": "friction_deg", "--damping": "damping", "--dt-safety": "dt_safety",
+           "--rolling-friction": "rolling_friction", "--rolling-stiffness": "rolling_stiffness"}
 
 
 def load_params(path) -> DemParams:

@@ -261,9 +261,9 @@ def state_fingerprint(state: State) -> str:
     fingerprint give the same probe results (the kernels are deterministic)."""
     h = hashlib.sha256()
     for a in (state.x, state.v, state.w, state.theta, state.r, state.walls, state.walls_ref,
-              state.prev, state.x_ref, state.pi, state.pj, state.ft, state.ref_len):
+              state.prev, state.x_ref, state.pi, state.pj, state.ft, state.mr, state.ref_len):
         h.update(np.ascontiguousarray(a).tobytes())
-    h.update(json.dumps([state.params.to_dict(), state.step, state.mu, state.cap_on,
+    h.update(json.dumps([state.params.to_dict(), state.step, state.mu, state.mu_r, state.cap_on,
                          list(state.control)], default=str).encode())
     return h.hexdigest()
 

@@ -97,8 +97,9 @@ def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.
     # to be pushed through a granular gas by the walls (slow for 12,000 disks).
     phi0 = math.pi * float(np.sum(r ** 2)) / ((walls[1] - walls[0]) * (walls[3] - walls[2]))
     s0 = min(1.0, math.sqrt(phi0 / (1.0 - target_porosity)))
+    # rolling resistance, like friction, is off while the sample densifies
     sim = Simulation.new(params, x * s0, r * s0, walls * s0,
-                         mu=math.tan(math.radians(friction_deg)))
+                         mu=math.tan(math.radians(friction_deg)), mu_r=0.0)
     # masses and inertias are those of the final radii from the start: dt stays valid
     sim.m[:] = params.density * math.pi * r ** 2 * params.thickness
     sim.inertia[:] = 0.5 * sim.m * r ** 2
@@ -136,6 +137,7 @@ def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.
     sim.vmax_override = None
     sim.damping = params.damping
     sim.mu = params.mu
+    sim.mu_r = params.rolling_friction
     ok2, st2, ub, s = equilibrate(sim, (stress, stress), tol, unbalanced_tol, max_steps,
                                   progress=prog("friction restored"))
     sim.ref_len = sim.size.copy()

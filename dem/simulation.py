@@ -34,9 +34,11 @@ class State(NamedTuple):
     pi: np.ndarray         # (P,) int32
     pj: np.ndarray         # (P,) int32
     ft: np.ndarray         # (P,) tangential history [N]
+    mr: np.ndarray         # (P,) rolling-moment history [N m] (moment on pi; zeros without rolling)
     step: int
     time: float
     mu: float              # current friction coefficient (reduced during compaction)
+    mu_r: float            # current rolling friction (0 during compaction)
     cap_on: bool           # Coulomb cap active (False = sliding prevented)
     control: Control
     ref_len: np.ndarray    # (2,) (W0, H0) reference lengths for strains [m]
@@ -70,6 +72,7 @@ class Simulation:
         self.step = int(state.step)
         self.time = float(state.time)
         self.mu = float(state.mu)
+        self.mu_r = float(state.mu_r)
         self.cap_on = bool(state.cap_on)
         self.control = state.control
         self.ref_len = c(state.ref_len)
@@ -77,14 +80,15 @@ class Simulation:
         self.dt = p.dt
         n = len(self.r)
         self.fext = np.zeros((n, 2))
-        self.fnet = np.zeros((n, 3))
+        self.fnet = np.zeros((n, 4))   # fx, fy, torque, rolling moments
         self.disp2 = np.zeros(n)
         self.wF = np.zeros(4)
         self.wK = np.zeros(4)
         # The list is rebuilt from the *reference* positions so that a loaded state gets
         # exactly the candidate lists the original run had.
         self.pairs = finish_pair_list(self.x_ref, self.r, self.walls_ref, p.skin,
-                                      c(state.pi, np.int32), c(state.pj, np.int32), c(state.ft))
+                                      c(state.pi, np.int32), c(state.pj, np.int32), c(state.ft),
+                                      c(state.mr))
         self.n_rebuilds = 0
         self.vmax_override = None  # wall speed cap override [m/s] (compaction only)
         # blocks of disks run concurrently: None = one per thread of the chosen count (the
@@ -94,8 +98,9 @@ class Simulation:
 
     # ------------------------------------------------------------------------------
     @classmethod
-    def new(cls, params: DemParams, x, r, walls, mu=None, control=None):
-        """Fresh simulation at rest from positions x (N,2), radii r (N,), walls (4,)."""
+    def new(cls, params: DemParams, x, r, walls, mu=None, control=None, mu_r=None):
+        """Fresh simulation at rest from positions x (N,2), radii r (N,), walls (4,); mu,
+        mu_r: friction and rolling friction to start with (default: the params')."""
         x = np.asarray(x, float)
         r = np.asarray(r, float)
         walls = np.asarray(walls, float)
@@ -103,8 +108,9 @@ class Simulation:
         n = len(r)
         st = State(params, x, np.zeros((n, 2)), np.zeros(n), np.zeros(n), r, walls,
                    walls.copy(), np.zeros(4), x.copy(), np.zeros(0, np.int32),
-                   np.zeros(0, np.int32), np.zeros(0), 0, 0.0,
-                   params.mu if mu is None else mu, True,
+                   np.zeros(0, np.int32), np.zeros(0), np.zeros(0), 0, 0.0,
+                   params.mu if mu is None else mu,
+                   params.rolling_friction if mu_r is None else mu_r, True,
                    control if control is not None else Control(),
                    np.array([walls[1] - walls[0], walls[3] - walls[2]]))
         sim = cls(st)
@@ -112,10 +118,10 @@ class Simulation:
         return sim
 
     def rebuild(self):
-        """Rebuild the pair list at the current positions, carrying tangential history."""
+        """Rebuild the pair list at the current positions, carrying the contact histories."""
         pl = self.pairs
         self.pairs = build_pair_list(self.x, self.r, self.walls, self.params.skin,
-                                     pl.pi, pl.pj, pl.ft)
+                                     pl.pi, pl.pj, pl.ft, pl.mr)
         self.x_ref[:] = self.x
         self.walls_ref[:] = self.walls
         self.fext[:] = 0.0
@@ -142,10 +148,11 @@ class Simulation:
             t0 = time.perf_counter()
             done = kernels.advance(
                 chunk, self.x, self.v, self.w, self.theta, self.r, self.m, self.inertia,
-                pl.pi, pl.pj, pl.ft, pl.cand_off, pl.cand, self.fext, self.fnet, self.x_ref,
+                pl.pi, pl.pj, pl.ft, pl.mr, pl.cand_off, pl.cand, self.fext, self.fnet, self.x_ref,
                 self.walls_ref, self.disp2, self.walls, self.prev, self.wF, self.wK,
                 mode, s_from, s_to, ramp_start, ramp_len, rate, len0, self.step,
-                p.kn, p.kt, self.mu, self.cap_on, p.normal_damping_ratio, self.damping,
+                p.kn, p.kt, self.mu, self.cap_on, p.normal_damping_ratio,
+                p.rolling_stiffness * p.kt, self.mu_r, self.damping,
                 self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
                 self.vmax_override or p.servo_vmax,
                 0.5 * p.skin, nblocks)
@@ -168,8 +175,8 @@ class Simulation:
         pl = self.pairs
         return State(self.params, c(self.x), c(self.v), c(self.w), c(self.theta), c(self.r),
                      c(self.walls), c(self.walls_ref), c(self.prev), c(self.x_ref),
-                     c(pl.pi), c(pl.pj), c(pl.ft), self.step, self.time, self.mu,
-                     self.cap_on, self.control, c(self.ref_len))
+                     c(pl.pi), c(pl.pj), c(pl.ft), c(pl.mr), self.step, self.time, self.mu,
+                     self.mu_r, self.cap_on, self.control, c(self.ref_len))
 
     def snapshot(self) -> Snapshot:
         pl = self.pairs

@@ -146,19 +146,28 @@ def test_probes_on_a_dask_cluster_equal_local_runs(reference):
 def test_checkpoint_with_another_cap_keeps_the_decided_runs(reference, tmp_path):
     # a run is deterministic and the cap only truncates it: with a larger cap the decided runs
     # are kept and only the undecided ones run again; with a smaller one, runs decided beyond it
-    # run again (and give undecided)
+    # run again (and give undecided).  Two sweeps: one whose cap cuts every run short (all
+    # undecided), one that lets them end; the caps are chosen from the runs' own lengths.
     import json
     import dem.probes as probes
     ck = tmp_path / "runs.jsonl"
-    small = ProbeOptions(max_steps=40_000)     # these runs end at 43,000-48,000 steps
-    rows = probes.run_probes(reference, [45.0, 225.0], small, workers=1, verbose=False,
-                             checkpoint=str(ck))
+    big = ProbeOptions(max_steps=400_000)
+    probes.run_probes(reference, [45.0, 225.0], big, workers=1, verbose=False, checkpoint=str(ck))
     recs = [json.loads(l) for l in ck.read_text().splitlines()[1:]]
-    kept = probes.read_checkpoint(str(ck), reference, small._replace(max_steps=400_000))
-    assert {r["outcome"] for r in recs} == {"equilibrium", "undecided"}     # both kinds
-    for r in recs:
-        key = (r["alpha_sigma"], r["sliding"])
-        assert (key in kept) == (r["outcome"] != "undecided")
-    assert probes.read_checkpoint(str(ck), reference, small._replace(max_steps=30_000)) == {}
+    assert {r["outcome"] for r in recs} == {"equilibrium"}
+    # a run's steps count its ramp, the cap does not
+    shortest = min(r["steps"] for r in recs) - big.ramp_steps
+    longest = max(r["steps"] for r in recs) - big.ramp_steps
+    kept = probes.read_checkpoint(str(ck), reference, big._replace(max_steps=longest))
+    assert len(kept) == len(recs)                         # decided within the new cap: kept
+    assert probes.read_checkpoint(str(ck), reference, big._replace(max_steps=shortest - 1)) == {}
+    small = ProbeOptions(max_steps=shortest // 2)
+    ck2 = tmp_path / "runs_small.jsonl"
+    probes.run_probes(reference, [45.0, 225.0], small, workers=1, verbose=False,
+                      checkpoint=str(ck2))
+    recs2 = [json.loads(l) for l in ck2.read_text().splitlines()[1:]]
+    assert {r["outcome"] for r in recs2} == {"undecided"}
+    assert probes.read_checkpoint(str(ck2), reference, big) == {}   # undecided: run again
+    assert len(probes.read_checkpoint(str(ck2), reference, small)) == len(recs2)
     with pytest.raises(ValueError, match="other"):
         probes.read_checkpoint(str(ck), reference, small._replace(stress_tol=10.0))

@@ -104,19 +104,32 @@ def check_config(cfg: BiaxialConfig) -> None:
 
 
 def _warm_indicators():
-    """Compile fem's own kernels (the local indicators) on one elastic point."""
+    """Compile fem's own kernels on tiny cases: the local indicators on one elastic point, the
+    FE's update kernel (both drivers) and flag counts on 70 and 4 points of 8 orientations, the
+    stiffness sum on one element."""
+    from hmodel import HParams
+    from .adapter import MaterialField
     from .indicators import local_indicators
+    from .mesh import rectangle
+    from .problem import Biaxial
     I = np.eye(2)
     D = (np.einsum("ij,kl->ijkl", I, I) + np.einsum("ik,jl->ijkl", I, I)
          + np.einsum("il,jk->ijkl", I, I))[..., None] * 1e6
     local_indicators(D, n_sphere=8)
+    p = HParams(n_dir=8)
+    for n in (70, 4):
+        mf = MaterialField(n, [(p, np.arange(n))])
+        t = mf.trial(np.zeros((2, 2, n)))
+        mf.pattern_changes(t, t)
+    Biaxial(rectangle(1.0, 1.0, 1, 1), p).stiffness(D[..., [0] * 4])
 
 
 def _fem_kernels():
     import numba
 
-    from . import indicators
-    return [v for v in vars(indicators).values() if isinstance(v, numba.core.registry.CPUDispatcher)]
+    from . import _kernel, adapter, indicators, problem
+    return [v for m in (indicators, _kernel, adapter, problem) for v in vars(m).values()
+            if isinstance(v, numba.core.registry.CPUDispatcher)]
 
 
 def main(argv=None) -> int:

@@ -20,10 +20,14 @@ from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
+import numba
 import numpy as np
 
-from hmodel import HParams, update_full, broadcast_state
+from hmodel import HParams, broadcast_state, _kernels
 from hmodel.driver import isotropic_state
+from hmodel.material import (HState, PARALLEL_MIN_POINTS, check_state, kernel_args, to_voigt,
+                             from_voigt, _material_args, _refuse_non_finite)
+from ._kernel import fe_update_parallel, fe_update_serial
 
 __all__ = ["strain_to_model", "stress_to_fe", "tangent_to_fe", "MaterialField", "Trial"]
 
@@ -48,6 +52,56 @@ def stress_to_model(sigma_fe: np.ndarray) -> np.ndarray:
 def tangent_to_fe(D_model: np.ndarray) -> np.ndarray:
     """(2, 2, 2, 2, *batch) material tangent [Pa] -> FE tangent [Pa] (same values, relabelled)."""
     return D_model[_P][:, _P][:, :, _P][:, :, :, _P]
+
+
+# The kernel's (npts, 3, 3) tangent T[p, a, b] = d sigma_a / d v_b (v = (e11, e22, e12)) -> the FE
+# tangent in one gather: D_fe[i, j, k, l] = C[p_i, p_j, p_k, p_l], C[i, j, k, l] = T[I_ij, I_kl] *
+# (1/2 where I_kl is the shear entry), as hmodel.material.tangent_from_voigt and tangent_to_fe
+# compute it (the same products: the same bits)
+_VI = np.array([[0, 2], [2, 1]])[_P][:, _P]
+_VH = np.where(_VI == 2, 0.5, 1.0)
+_VA = _VI[:, :, None, None]
+_VB = _VI[None, None, :, :]
+
+
+def _tangent_fe_from_kernel(T: np.ndarray) -> np.ndarray:
+    Tt = T.transpose(1, 2, 0)                                   # (3, 3, npts), a view
+    return Tt[_VA, _VB] * _VH[None, None, :, :, None]
+
+
+def _stress_fe_from_kernel(sig: np.ndarray, out: np.ndarray) -> None:
+    """(npts, 3) material stress (11, 22, 12) -> FE stress out (2, 2, npts): sigma_fe[i, j] =
+    -sigma_model[p_i, p_j] (stress_to_fe of from_voigt)."""
+    out[0, 0] = -sig[:, 1]
+    out[1, 1] = -sig[:, 0]
+    out[0, 1] = -sig[:, 2]
+    out[1, 0] = -sig[:, 2]
+
+
+@numba.njit(cache=True)
+def _row_fractions(flags):
+    """(npts,) fraction of the True flags of each row of (npts, n_dir) bools: the integer count
+    / n_dir, the value (and bits) of flags.mean(axis=-1), without numpy's conversion of the
+    flags to numbers."""
+    npts, n = flags.shape
+    out = np.empty(npts)
+    for p in range(npts):
+        c = 0
+        for i in range(n):
+            c += flags[p, i]
+        out[p] = c / n
+    return out
+
+
+@numba.njit(cache=True)
+def _n_differ(a, b):
+    """Number of entries where two bool arrays of the same shape differ."""
+    x = a.ravel()
+    y = b.ravel()
+    c = 0
+    for i in range(x.size):
+        c += x[i] != y[i]
+    return c
 
 
 class Trial(NamedTuple):
@@ -108,26 +162,61 @@ class MaterialField:
     def trial(self, d_eps_fe: np.ndarray) -> Trial:
         """Update every point from the committed state by the FE strain increment
         ``d_eps_fe`` (2, 2, npts) (the total increment of the load step: the sliding pattern of
-        the H-model is decided by the increment from the committed state)."""
-        de_m = strain_to_model(np.asarray(d_eps_fe, dtype=float).reshape(2, 2, self.npts))
+        the H-model is decided by the increment from the committed state).
+
+        The same update as ``hmodel.update_full(state, d_eps, params, extras=False)`` (same
+        checks, the same bits), by the FE's copy of its kernel (``fem._kernel``: the sliding
+        hexagons in the vectorized pass too), called here directly; the FE stress and tangent
+        are gathered from the kernel's outputs at once (no Lagrangian tangent, increment or T3
+        conversions the FE never reads). The outputs are new arrays at every call, as in
+        ``update_full``: pooled buffers saved a few page faults but changed how the process's
+        heap serves other large arrays (the benchmark's batch baseline, interleaved with the run,
+        then took ~4500 page faults a call and twice the time)."""
+        d_eps_fe = np.asarray(d_eps_fe, dtype=float).reshape(2, 2, self.npts)
+        if not np.all(np.isfinite(d_eps_fe)):
+            raise ValueError("d_eps contains non-finite values (nan or inf)")
+        de_m = strain_to_model(d_eps_fe)
+        one = len(self.groups) == 1
         sigma = np.empty((2, 2, self.npts))
-        D = np.empty((2, 2, 2, 2, self.npts))
+        D = None if one else np.empty((2, 2, 2, 2, self.npts))
         sliding = np.empty(self.npts)
         opened = np.empty(self.npts)
         states = []
-        for (params, idx), st in zip(self.groups, self.states):
-            one = len(self.groups) == 1
-            de = de_m if one else de_m[:, :, idx]
-            # extras=False: the FE reads the stress, the tangent and the new state only (the
-            # probe-only extras cost a third of the update)
-            inc = update_full(st, de, params, allow_sliding=self.allow_sliding, extras=False)
-            sigma[:, :, idx] = stress_to_fe(inc.stress)
-            D[..., idx] = tangent_to_fe(inc.tangent)
-            ns = inc.state
-            sliding[idx] = ns.sliding.mean(axis=-1)
-            opened[idx] = ns.is_open.mean(axis=-1)
+        for g, ((params, idx), st) in enumerate(zip(self.groups, self.states)):
+            de = to_voigt(de_m if one else de_m[:, :, idx])
+            ns, sig, tan = self._update(g, params, st, de)
+            if one:
+                _stress_fe_from_kernel(sig, sigma)
+                D = _tangent_fe_from_kernel(tan)
+            else:
+                s_g = np.empty((2, 2, idx.size))
+                _stress_fe_from_kernel(sig, s_g)
+                sigma[:, :, idx] = s_g
+                D[..., idx] = _tangent_fe_from_kernel(tan)
+            sliding[idx] = _row_fractions(ns.sliding)
+            opened[idx] = _row_fractions(ns.is_open)
             states.append(ns)
         return Trial(sigma, D, states, sliding, opened)
+
+    def _update(self, g: int, params: HParams, st: HState, de: np.ndarray):
+        """(new state, kernel stress (n, 3), kernel tangent (n, 3, 3)) of group ``g`` for the
+        material strain increment ``de`` (n, 3) (11, 22, 12): hmodel.update_full's steps."""
+        check_state(st, params)
+        args = kernel_args(st, params)          # 10 hexagon fields, was_open, eps, V0, eps
+        npts, ndir = args[0].shape
+        was_slid = np.ascontiguousarray(st.sliding, dtype=np.bool_).reshape(npts, ndir)
+        out = _kernels.allocate_outputs(npts, ndir)
+        kern = fe_update_parallel if npts >= PARALLEL_MIN_POINTS else fe_update_serial
+        kern(*args[:11], was_slid, *args[11:13], de, *_material_args(params), self.allow_sliding,
+             False, *out)
+        sig, tan = out[12], out[13]
+        if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
+            _refuse_non_finite(st)
+        batch = st.batch_shape
+        ns = HState(*out[:10], eps=st.eps + from_voigt(de, batch), stress=from_voigt(sig, batch),
+                    V0=np.array(st.V0, dtype=float), sliding=out[10], is_open=out[11],
+                    params_key=st.params_key)
+        return ns, sig, tan
 
     def fractions(self) -> tuple:
         """(sliding, opened): (npts,) fractions of the hexagons of each point that slid / are open
@@ -146,5 +235,5 @@ class MaterialField:
     def pattern_changes(a: Trial, b: Trial) -> int:
         """Number of hexagons whose sliding or opening flag differs between two trials (a Newton
         iteration where this is non-zero is not expected to converge quadratically)."""
-        return int(sum(np.count_nonzero(x.sliding != y.sliding) + np.count_nonzero(x.is_open != y.is_open)
+        return int(sum(_n_differ(x.sliding, y.sliding) + _n_differ(x.is_open, y.is_open)
                        for x, y in zip(a.states, b.states)))

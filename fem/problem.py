@@ -21,8 +21,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import _sparsetools
 import skfem
 from skfem import Basis, FacetBasis, ElementVector, LinearForm
 from skfem.helpers import dot
@@ -126,10 +128,13 @@ class Biaxial:
         self._Bp = np.ascontiguousarray(
             self.Bsym.reshape(self.nbf, 4, self.npts).transpose(2, 0, 1))
         self._wp = self.dx.reshape(self.npts)
+        self._elem_w = self.dx / self.dx.sum(axis=1, keepdims=True)     # per_element's weights
+        self._strains = []                                               # strain()'s memory
         rows = np.broadcast_to(self.edofs[:, None, :], (self.nbf, self.nbf, self.nel))
         cols = np.broadcast_to(self.edofs[None, :, :], (self.nbf, self.nbf, self.nel))
         self._rows = rows.transpose(2, 0, 1).ravel()   # element-major like the element matrices
         self._cols = cols.transpose(2, 0, 1).ravel()
+        self._setup_csr()
         self._setup_bcs()
         # material groups
         groups = [(params, np.arange(self.npts))]
@@ -143,6 +148,32 @@ class Biaxial:
             groups = [(params, np.flatnonzero(~pts)), (imperfection.params(params), np.flatnonzero(pts))]
             self.weak_elements = weak
         self.material = MaterialField(self.npts, groups, allow_sliding=allow_sliding)
+
+    def _setup_csr(self):
+        """The CSR pattern of K and, for every stored entry, the element-matrix entries it sums,
+        in the order ``coo_matrix(...).tocsr()`` sums them (scipy's coo_tocsr keeps the input
+        order within a row, csr_sort_indices then sorts each row by column with a sort whose
+        moves depend on the columns only, and csr_sum_duplicates adds each run of equal columns
+        left to right): found once by converting the entry numbers themselves, so that
+        ``stiffness`` gives the same bits as the conversion without redoing it at every call."""
+        n = self._rows.size
+        M = self.ndofs
+        if n == 0 or max(M, n) >= np.iinfo(np.int32).max:
+            self._csr = None
+            return
+        idx = np.int32
+        indptr = np.empty(M + 1, dtype=idx)
+        indices = np.empty(n, dtype=idx)
+        tags = np.empty(n)
+        _sparsetools.coo_tocsr(M, M, n, self._rows.astype(idx), self._cols.astype(idx),
+                               np.arange(n, dtype=float), indptr, indices, tags)
+        _sparsetools.csr_sort_indices(M, indptr, indices, tags)
+        rows = np.repeat(np.arange(M, dtype=np.int64), np.diff(indptr))
+        key = rows * M + indices
+        starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+        counts = np.bincount(rows[starts], minlength=M)
+        self._csr = (tags.astype(np.int64), starts, indices[starts],
+                     np.r_[0, np.cumsum(counts)].astype(idx))
 
     # -- boundary conditions -----------------------------------------------------------------
     def _setup_bcs(self):
@@ -186,10 +217,19 @@ class Biaxial:
 
     # -- kinematics and assembly --------------------------------------------------------------
     def strain(self, u: np.ndarray) -> np.ndarray:
-        """(2, 2, npts) small strain of the nodal displacement u (ndofs,) [m], tension +."""
+        """(2, 2, npts) small strain of the nodal displacement u (ndofs,) [m], tension +.
+
+        The last two results are remembered with a copy of their u: the converged iterate's
+        strain is asked again by the step's record and, as the committed strain, by the next
+        step's Newton (a comparison of u instead of the contraction; a new array each call)."""
+        u = np.asarray(u)
+        for key, eps in self._strains:
+            if key.shape == u.shape and key.dtype == u.dtype and np.array_equal(key, u):
+                return eps.copy()
         ue = u[self.edofs]                                              # (nbf, nel)
-        eps = np.einsum("je,jabeq->abeq", ue, self.Bsym, optimize=True)
-        return eps.reshape(2, 2, self.npts)
+        eps = np.einsum("je,jabeq->abeq", ue, self.Bsym, optimize=True).reshape(2, 2, self.npts)
+        self._strains = [(u.copy(), eps.copy())] + self._strains[:1]
+        return eps
 
     def internal_force(self, sigma: np.ndarray) -> np.ndarray:
         """f_int = sum_points B^T sigma dx, shape (ndofs,) [N/m]; sigma (2, 2, npts) [Pa]."""
@@ -203,9 +243,16 @@ class Biaxial:
         Dp = np.ascontiguousarray(D.reshape(4, 4, self.npts).transpose(2, 0, 1))   # (P, 4, 4)
         BD = np.matmul(self._Bp, Dp) * self._wp[:, None, None]                   # (P, nbf, 4)
         Ke = np.matmul(BD, self._Bp.transpose(0, 2, 1))                          # (P, nbf, nbf)
-        Ke = Ke.reshape(self.nel, self.nqp, self.nbf, self.nbf).sum(axis=1)
-        K = sp.coo_matrix((Ke.ravel(), (self._rows, self._cols)), shape=(self.ndofs, self.ndofs))
-        return K.tocsr()
+        if self._csr is None:
+            Ke = Ke.reshape(self.nel, self.nqp, self.nbf, self.nbf).sum(axis=1)
+            K = sp.coo_matrix((Ke.ravel(), (self._rows, self._cols)), shape=(self.ndofs, self.ndofs))
+            return K.tocsr()
+        perm, starts, indices, indptr = self._csr
+        data = _sum_runs(Ke.reshape(self.nel, self.nqp, self.nbf * self.nbf), perm, starts,
+                         np.empty(starts.size))
+        K = sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(self.ndofs, self.ndofs))
+        K.has_canonical_format = True          # sorted, no duplicates: what tocsr() leaves
+        return K
 
     def platen_force(self, f_int: np.ndarray) -> float:
         """Vertical force of the specimen on the top platen, tension + [N/m]."""
@@ -220,5 +267,36 @@ class Biaxial:
         f = field.reshape(field.shape[:-1] + (self.nel, self.nqp))
         if how == "min":
             return f.min(axis=-1)
-        w = self.dx / self.dx.sum(axis=1, keepdims=True)
-        return np.sum(f * w, axis=-1)
+        return np.sum(f * self._elem_w, axis=-1)
+
+
+@numba.njit(cache=True)
+def _element_entry(Kq, r):
+    """Entry r of the element matrices (nel, nbf, nbf) flattened: the sum of the point matrices
+    Kq (nel, nqp, nbf * nbf) over the element's points, from the first to the last (as numpy's
+    .sum(axis=1) adds along a non-contiguous axis)."""
+    nqp = Kq.shape[1]
+    m = Kq.shape[2]
+    e = r // m
+    c = r - e * m
+    s = Kq[e, 0, c]
+    for q in range(1, nqp):
+        s += Kq[e, q, c]
+    return s
+
+
+@numba.njit(cache=True)
+def _sum_runs(Kq, perm, starts, out):
+    """out[g] = Ke[perm[starts[g]]] + Ke[perm[starts[g] + 1]] + ... (left to right) up to the
+    next start, Ke = the element matrices flattened (``_element_entry`` of the point matrices
+    Kq): the entries of K as csr_sum_duplicates adds them."""
+    m = starts.size
+    n = perm.size
+    for g in range(m):
+        a = starts[g]
+        b = starts[g + 1] if g + 1 < m else n
+        s = _element_entry(Kq, perm[a])
+        for k in range(a + 1, b):
+            s += _element_entry(Kq, perm[k])
+        out[g] = s
+    return out

@@ -450,6 +450,7 @@ DEFAULT_FULL = {"n": 12000, "rate": 0.01, "max_steps": 1_400_000}
 def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
     """report.md: every figure embedded and the paper's section-5 conclusions in numbers."""
     from hmodel.io import atomic_open
+    from .domain import eta_lim_text
     from hmodel.probes import format_arcs
     hm, dm, fm = c["hmodel"], c["dem"], c["fem"]
     L = ["# Cross-check: H-model, finite elements and DEM", "",
@@ -544,8 +545,7 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
              + (f"the first state with W2 <= 0 or a failure is {b['lower_state']} at eta = "
                 f"{b['lower_eta']:.4f} ({b['lower_eta_fraction']:.3f} of its peak {b['eta_peak']:.4f}; "
                 f"{b['lower_why']})" if b["lower_state"] else "no state with W2 <= 0 or a failure")
-             + f"; strength under stress control eta_lim in [{b['eta_lim_low']:.4f}, "
-             f"{b['eta_lim_high']:.4f}] (largest target held, smallest target failed).")
+             + f"; strength under stress control: {eta_lim_text(b)}.")
         n_probed = sum(1 for r in dd["rows"] if r["probed"])
         if n_probed < sum(1 for r in dd["rows"] if r["reference"] != "failure"):
             s += (f" Only {n_probed} of the {len(dd['rows'])} saved states were probed (the others "

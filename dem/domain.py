@@ -118,6 +118,17 @@ def boundaries(domain_rows, eta_peak):
             "eta_lim_bracket_consistent": bool(not (lo == lo and hi == hi) or lo <= hi)}
 
 
+def eta_lim_text(b):
+    """One phrase for the strength under stress control: the bracket [largest target held,
+    smallest target failed], or, when a target held above one that failed (the limit then
+    depends on the direction of the stress path, not on eta alone), both numbers said so."""
+    lo, hi = b["eta_lim_low"], b["eta_lim_high"]
+    if b["eta_lim_bracket_consistent"]:
+        return f"eta_lim in [{lo:.4f}, {hi:.4f}] (largest target held, smallest target failed)"
+    return (f"no single eta_lim: targets held up to eta = {lo:.4f} in some directions and failed "
+            f"from {hi:.4f} in others (the limit depends on the direction of the stress path)")
+
+
 def _relax_task(args):
     state, opts, out_dir, resume = args
     return reference_state(state, out_dir, opts, resume=resume, verbose=False, threads=1)
@@ -217,8 +228,7 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
                           json.dumps(b, indent=1, default=float).encode())
     plot_domain(drows, by, todo, b, out_dir)
     log(f"done in {time.time() - t0:.0f} s: lower boundary {b['lower_state']} "
-        f"(eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the peak); eta_lim in "
-        f"[{b['eta_lim_low']:.4f}, {b['eta_lim_high']:.4f}]")
+        f"(eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the peak); {eta_lim_text(b)}")
     return drows, b, {todo[k][0]: by[k] for k in by}
 
 
@@ -285,7 +295,9 @@ def plot_domain(drows, by, todo, b, out_dir):
             ax.hlines(b["lower_eta"] / scale_d, x - 0.3, x + 0.3, color="k", lw=2)
         lo, hi = b["eta_lim_low"] / scale_d, b["eta_lim_high"] / scale_d
         if lo == lo and hi == hi:
-            ax.fill_between([x - 0.3, x + 0.3], lo, hi, color="C3", alpha=0.25, lw=0)
+            # held above failed: the band where both happened, hatched
+            ax.fill_between([x - 0.3, x + 0.3], min(lo, hi), max(lo, hi), color="C3", alpha=0.25,
+                            lw=0, hatch=None if lo <= hi else "//")
         ax.hlines(1.0 if frac else b["eta_peak"], x - 0.3, x + 0.3, color="k", ls=":", lw=1)
         labels = ["DEM"]
         hm = b.get("hmodel")

@@ -2,6 +2,7 @@
 set of directions; CSV columns, figures, resume bit-identical, a two-worker dask cluster."""
 import csv
 import json
+import math
 
 import pytest
 
@@ -97,3 +98,26 @@ def test_domain_end_to_end_resume_and_dask(biaxial_dir, tmp_path, monkeypatch):
               ",".join(ALPHAS), "--scheduler", cluster.scheduler_address, "--no-hmodel"])
     assert (out2 / "domain.csv").read_bytes() == first
     assert (out2 / "domain_probes.csv").read_bytes() == first_probes
+
+
+def _row(state, eta, n_failure=0, min_w2=0.5, held=math.nan, failed=math.nan):
+    return {"state": state, "eta": eta, "reference": "equilibrium", "probed": True,
+            "n_failure": n_failure, "min_w2": min_w2, "eta_target_max_held": held,
+            "eta_target_min_failed": failed}
+
+
+def test_boundaries_and_an_eta_lim_that_depends_on_the_direction():
+    from dem.domain import boundaries, eta_lim_text
+    rows = [_row("a", 0.80, held=0.81), _row("b", 0.84, min_w2=0.04, held=0.851),
+            _row("c", 0.86, n_failure=3, min_w2=0.01, held=0.8713, failed=0.8639)]
+    b = boundaries(rows, 0.8844)
+    assert b["lower_state"] == "c" and b["lower_why"] == "failure"
+    assert b["last_stable_eta"] == 0.84
+    assert math.isclose(b["lower_eta_fraction"], 0.86 / 0.8844)
+    # the 2000-disk quick run: a target held (0.8713) above one that failed (0.8639): there is
+    # no single limit, and the text says so instead of printing an inverted bracket
+    assert not b["eta_lim_bracket_consistent"]
+    assert "no single eta_lim" in eta_lim_text(b) and "0.8713" in eta_lim_text(b)
+    b2 = boundaries(rows[:2] + [_row("c", 0.86, n_failure=3, held=0.86, failed=0.8639)], 0.8844)
+    assert b2["eta_lim_bracket_consistent"]
+    assert eta_lim_text(b2).startswith("eta_lim in [0.8600, 0.8639]")

@@ -1,4 +1,4 @@
-"""Command line: python -m dem {biaxial, probes, bench} ... (thin layer over the library)."""
+"""Command line: python -m dem {biaxial, probes, domain, calibrate, ...} (thin layer over the library)."""
 from __future__ import annotations
 
 import argparse
@@ -48,6 +48,10 @@ def add_param_options(p, n_default=None):
     p.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=None,
                    help="Cundall damping")
     p.add_argument("--dt-safety", type=opt.real(0, 0.5, hi_open=False), default=None)
+    p.add_argument("--rolling-friction", type=opt.real(0, 10, lo_open=False), default=None,
+                   help="mu_r: rolling moment capped at mu_r R* fn (0 = free rotation, the paper's)")
+    p.add_argument("--rolling-stiffness", type=opt.real(0, 1e3), default=None,
+                   help="k_r = this * kt * R*^2 (used only with --rolling-friction > 0)")
 
 
 def cmd_params(a):
@@ -146,13 +150,14 @@ def cmd_domain(a):
         todo, _ = load_states(a.biaxial, states)
         for _, st, _ in todo:
             _check_state_params(st.params, a)
+    from .domain import eta_lim_text
     rows, b, _ = run_domain(a.biaxial, a.out, states=states, alphas=alphas, opts=opts,
                          workers=a.workers, scheduler=a.scheduler, resume=a.resume,
                          hmodel=not a.no_hmodel)
     print(f"domain: {len(rows)} states -> {os.path.join(a.out, 'domain.csv')}; lower boundary: "
           f"{b['lower_state']} (eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the "
-          f"peak {b['eta_peak']:.4f}, {b['lower_why']}); eta_lim in [{b['eta_lim_low']:.4f}, "
-          f"{b['eta_lim_high']:.4f}]; wall time {time.time() - t0:.1f} s")
+          f"peak {b['eta_peak']:.4f}, {b['lower_why']}); {eta_lim_text(b)}; "
+          f"wall time {time.time() - t0:.1f} s")
 
 
 def cmd_bench(a):
@@ -162,6 +167,24 @@ def cmd_bench(a):
     for k, v in res.items():
         print(f"{k}: {v}")
     print(f"particle-steps/s: {res['particle_steps_per_s_auto']:.4g}")
+
+
+def cmd_calibrate(a):
+    from .calibrate import run_calibration
+    if a.n is None and a.params is None:
+        a.n = 2000                       # calibrate's default sample (see its --help)
+    t0 = time.time()
+    s = run_calibration(a.out, _params(a), a.vary, bounds=a.bounds, target=a.target,
+                        grid=a.grid, min_step=a.min_step, max_evals=a.max_evals, rate=a.rate,
+                        confining=a.confining, eps_max=a.eps_max,
+                        post_peak_strain=a.post_peak_strain, smooth=a.smooth,
+                        workers=a.workers, scheduler=a.scheduler, resume=a.resume,
+                        stage=getattr(a, "stage", None))
+    print("\n".join(s["verdict"]["text"]))
+    print(f"calibrate: {s['evaluations']} evaluations ({s['run_now']} run now, "
+          f"{s['taken_from_checkpoint']} from the checkpoint), stopped: {s['stopped']}; "
+          f"{os.path.join(a.out, 'calibrated.json')}, calibration.csv, calibration.png; "
+          f"wall time {time.time() - t0:.1f} s")
 
 
 def cmd_crosscheck(a):
@@ -277,6 +300,47 @@ def main(argv=None):
                     help="measure beside a busy-loop process (a shared machine)")
     c.set_defaults(func=cmd_bench)
 
+    from .calibrate import DEFAULT_VARY, TARGETS, bounds_type, vary_type
+    k = sub.add_parser("calibrate", help="fit DEM parameters to the H-model's drained biaxial "
+                                         "test (peak q, eps1 at the peak, secant modulus)",
+                       description="Fit the --vary fields of the start set (--params / the "
+                                   "options, the paper's set by default; --n defaults to 2000 "
+                                   "here) so that the DEM's drained biaxial test matches the "
+                                   "H-model's: peak q within 5 %, eps1 at the peak within 25 %, "
+                                   "secant modulus q/eps1 at eps1 = 0.25 % within 20 %. See "
+                                   "docs/dem.md.")
+    add_param_options(k)
+    k.add_argument("--target", choices=TARGETS, default="hmodel",
+                   help="the curve to fit: the H-model, Table I, at --confining")
+    k.add_argument("--out", required=True)
+    k.add_argument("--vary", type=vary_type, default=DEFAULT_VARY,
+                   help="comma-separated DemParams float fields (or their option names, "
+                        "friction = friction_deg) to fit (default: %(default)s)")
+    k.add_argument("--bounds", type=bounds_type, default=None,
+                   help="search ranges NAME=LO:HI,... (default: kn_over_d 2e9:32e9 log, "
+                        "friction 20:50, kt_over_kn 0.2:1, rolling_friction 0:0.3, "
+                        "rolling_stiffness 0.25:4 log; others 0.5-2 x the start value)")
+    k.add_argument("--grid", type=opt.integer(2, 9), default=3,
+                   help="points per parameter of the first, full grid")
+    k.add_argument("--min-step", type=opt.real(0, 0.5, hi_open=False), default=1 / 16,
+                   help="smallest compass step, as a fraction of each range")
+    k.add_argument("--max-evals", type=opt.integer(1, 100_000), default=60,
+                   help="evaluations at most (may be raised on --resume)")
+    k.add_argument("--rate", type=opt.real(0, 10), default=0.01, help="axial strain rate [1/s]")
+    k.add_argument("--confining", type=opt.real(0, 1e9), default=200e3, help="[Pa]")
+    k.add_argument("--eps-max", type=opt.real(0.005, 0.5, lo_open=False), default=0.035,
+                   help="end of each test (also ends post-peak-strain after its peak)")
+    k.add_argument("--post-peak-strain", type=opt.real(0, 0.5), default=0.01,
+                   help="a test stops this strain after its peak (q below 0.98 of it)")
+    k.add_argument("--smooth", type=opt.real(0, 0.05, lo_open=False), default=0.001,
+                   help="strain window of the moving average of q for the peak (0: raw)")
+    k.add_argument("--workers", type=opt.integer(1, 1024), default=None,
+                   help="local processes (each evaluation runs on one thread)")
+    k.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+    k.add_argument("--resume", action="store_true",
+                   help="take every evaluation already in DIR/evaluations.jsonl, run the rest")
+    k.set_defaults(func=cmd_calibrate)
+
     x = sub.add_parser("crosscheck", help="H-model, FE and DEM side by side (report.md + figures)")
     x.add_argument("--out", required=True)
     x.add_argument("--dem-params", default=None,
@@ -302,8 +366,10 @@ def main(argv=None):
     def run(a, stage):
         if hasattr(a, "out"):
             opt.check_out_dir(a.out)
-        if a.cmd in ("probes", "domain") and a.scheduler and a.workers:
+        if a.cmd in ("probes", "domain", "calibrate") and a.scheduler and a.workers:
             raise opt.OptionError("--workers and --scheduler: allowed one of them")
+        if getattr(a, "directions", None):
+            _directions(a)            # bad input before the compilation
         stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"
                                    if hasattr(a, "resume") else ""))
         from . import kernels
@@ -312,6 +378,7 @@ def main(argv=None):
             t = time.time()
             compile_kernels()         # before the command's own timers start
             print(f"compiled in {time.time() - t:.1f} s", file=sys.stderr, flush=True)
+        a.stage = stage           # a command may say where it is (dem calibrate)
         a.func(a)
         return 0
 

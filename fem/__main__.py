@@ -105,8 +105,8 @@ def check_config(cfg: BiaxialConfig) -> None:
 
 def _warm_indicators():
     """Compile fem's own kernels on tiny cases: the local indicators on one elastic point, the
-    FE's update kernel (both drivers) and flag counts on 70 and 4 points of 8 orientations, the
-    stiffness sum on one element."""
+    adapter's flag counts (and hmodel's update kernel through it, both drivers) on 70 and 4
+    points of 8 orientations, the stiffness sum on one element."""
     from hmodel import HParams
     from .adapter import MaterialField
     from .indicators import local_indicators
@@ -127,8 +127,8 @@ def _warm_indicators():
 def _fem_kernels():
     import numba
 
-    from . import _kernel, adapter, indicators, problem
-    return [v for m in (indicators, _kernel, adapter, problem) for v in vars(m).values()
+    from . import adapter, indicators, problem
+    return [v for m in (indicators, adapter, problem) for v in vars(m).values()
             if isinstance(v, numba.core.registry.CPUDispatcher)]
 
 

@@ -27,7 +27,6 @@ from hmodel import HParams, broadcast_state, _kernels
 from hmodel.driver import isotropic_state
 from hmodel.material import (HState, PARALLEL_MIN_POINTS, check_state, kernel_args, to_voigt,
                              from_voigt, _material_args, _refuse_non_finite)
-from ._kernel import fe_update_parallel, fe_update_serial
 
 __all__ = ["strain_to_model", "stress_to_fe", "tangent_to_fe", "MaterialField", "Trial"]
 
@@ -165,8 +164,7 @@ class MaterialField:
         the H-model is decided by the increment from the committed state).
 
         The same update as ``hmodel.update_full(state, d_eps, params, extras=False)`` (same
-        checks, the same bits), by the FE's copy of its kernel (``fem._kernel``: the sliding
-        hexagons in the vectorized pass too), called here directly; the FE stress and tangent
+        checks, the same bits), by hmodel's kernel called here directly; the FE stress and tangent
         are gathered from the kernel's outputs at once (no Lagrangian tangent, increment or T3
         conversions the FE never reads). The outputs are new arrays at every call, as in
         ``update_full``: pooled buffers saved a few page faults but changed how the process's
@@ -204,11 +202,9 @@ class MaterialField:
         check_state(st, params)
         args = kernel_args(st, params)          # 10 hexagon fields, was_open, eps, V0, eps
         npts, ndir = args[0].shape
-        was_slid = np.ascontiguousarray(st.sliding, dtype=np.bool_).reshape(npts, ndir)
         out = _kernels.allocate_outputs(npts, ndir)
-        kern = fe_update_parallel if npts >= PARALLEL_MIN_POINTS else fe_update_serial
-        kern(*args[:11], was_slid, *args[11:13], de, *_material_args(params), self.allow_sliding,
-             False, *out)
+        kern = _kernels.update_parallel if npts >= PARALLEL_MIN_POINTS else _kernels.update_serial
+        kern(*args[:-1], de, *_material_args(params), self.allow_sliding, False, *out)
         sig, tan = out[12], out[13]
         if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
             _refuse_non_finite(st)

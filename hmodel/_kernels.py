@@ -10,6 +10,14 @@ The hexagon solve follows spec/hmodel.md (Eqs. 16-22 of Nicot, Hadda & Darve 201
 corrections the spec lists). For a fixed sliding/opening pattern every increment is affine in de,
 so the derivative of the returned stress is assembled exactly, term by term (chain rule through
 the 3x3 solve, the new angle, the new lengths and the volume).
+
+One update kernel for every caller (``material.update`` / ``update_full``, the driver's Numba
+paths, the probes, the FE's ``MaterialField``): per point, a branch-free fast pass the compiler
+vectorizes over the orientations (``_fast_pass``: closed hexagons that stay closed, elastic or
+sliding, small rotation, no extra contact) and a general loop for the rest (open, opening,
+closing, extra contacts, large rotations) with the same operations in the same order, so the same
+bits; ``extras=True`` (Lagrangian tangent, T3, micro sums) runs every hexagon through the general
+loop.
 """
 import math
 
@@ -18,15 +26,20 @@ from numba import njit, prange
 
 
 @njit(cache=True, inline="always")
-def _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                    cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding):
-    """Hexagon i of point p updated as in the common case (closed at both ends of the step,
-    elastic, no extra contact 1-4 or 2-6, |d_alpha| < 0.01): the operations of the general loop
-    of ``_update_point`` for that case, in the same order (same bits), without a branch.
+def _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
+                    cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, with_sliding):
+    """Hexagon i of point p updated as in the fast pass: closed at both ends of the step, no
+    extra contact 1-4 or 2-6, |d_alpha| < 0.01, and elastic or (``with_sliding``) sliding
+    (Coulomb). The operations of the general loop of ``_update_point`` for that case, in the same
+    order (same bits), without a branch: with ``with_sliding`` the elastic trial and the sliding
+    solve are both computed and selected. ``with_sliding`` is a literal at the call sites
+    (``_fast_pass``), so the compiler drops the sliding solve from the elastic pass, where a
+    hexagon whose trial violates Coulomb (when sliding is allowed) is left to the general loop.
 
     Returns the new (d1, d2, alpha, N1, T1, N2, l1, l2, cos alpha, sin alpha), ``other`` = 1.0
-    where the hexagon is not in the common case (0.0 otherwise), the three stress terms and the
-    nine tangent terms (row-major) that the point sums (Love-Weber, Eq. 23)."""
+    where the hexagon is not in this case (0.0 otherwise), ``slide`` (1.0 where it slides), the
+    three stress terms and the nine tangent terms (row-major) that the point sums (Love-Weber,
+    Eq. 23)."""
     c = cos_t[i]
     s = sin_t[i]
     cc = c * c
@@ -59,13 +72,41 @@ def _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_o
     da = i20 * dl1 + i21 * dl2
     nN1 = n1 - kn * dd1
     Ttr = t1 + kt * D1 * da
+    trial_slides = allow_sliding & (abs(Ttr) >= mu * nN1)
+    slide = with_sliding & trial_slides
+    # Coulomb sliding (the general loop's branch): row 3 replaced, the system solved again
+    xi = 1.0 if Ttr >= 0.0 else -1.0
+    a20 = ca + xi * mu * sa
+    sa22 = (n1 * sa - t1 * ca) * rkn
+    b2 = sa * (xi * mu * n1 - t1) * rkn
+    sc01 = a12 * a20 - a10 * sa22
+    srdet = 1.0 / (a00 * a12 + sc01 - a02 * a10)
+    j00 = a12 * srdet; j01 = (-a02 - sa22) * srdet
+    j10 = sc01 * srdet; j11 = (a00 * sa22 - a02 * a20) * srdet; j12 = (a02 * a10 - a00 * a12) * srdet
+    j20 = -a10 * srdet; j21 = (a20 + a00) * srdet
+    sdd1 = j00 * dl1 + j01 * dl2 + j00 * b2
+    sdd2 = j10 * dl1 + j11 * dl2 + j12 * b2
+    sda = j20 * dl1 + j21 * dl2 + j20 * b2
+    i00 = j00 if slide else i00
+    i01 = j01 if slide else i01
+    i10 = j10 if slide else i10
+    i11 = j11 if slide else i11
+    i20 = j20 if slide else i20
+    i21 = j21 if slide else i21
+    dd1 = sdd1 if slide else dd1
+    dd2 = sdd2 if slide else dd2
+    da = sda if slide else da
+    nN1 = n1 - kn * dd1          # elastic: the same value again
     x10 = i00 * g10 + i01 * g20; x11 = i00 * g11 + i01 * g21; x12 = i00 * g12 + i01 * g22
     x20 = i10 * g10 + i11 * g20; x21 = i10 * g11 + i11 * g21; x22 = i10 * g12 + i11 * g22
     x30 = i20 * g10 + i21 * g20; x31 = i20 * g11 + i21 * g21; x32 = i20 * g12 + i21 * g22
     nN2 = N2[p, i] - kn * dd2
     dN1_0 = -kn * x10; dN1_1 = -kn * x11; dN1_2 = -kn * x12
     dN2_0 = -kn * x20; dN2_1 = -kn * x21; dN2_2 = -kn * x22
-    dT1_0 = kt * D1 * x30; dT1_1 = kt * D1 * x31; dT1_2 = kt * D1 * x32
+    nT1 = xi * mu * nN1 if slide else Ttr
+    dT1_0 = xi * mu * dN1_0 if slide else kt * D1 * x30
+    dT1_1 = xi * mu * dN1_1 if slide else kt * D1 * x31
+    dT1_2 = xi * mu * dN1_2 if slide else kt * D1 * x32
     z = da * da
     sd = da + da * z * (-1.0 / 6.0 + z * (1.0 / 120.0 - z * (1.0 / 5040.0)))
     cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (1.0 / 40320.0))))
@@ -75,10 +116,10 @@ def _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_o
     nl2 = L2 + dl2
     # the additions of the (zero) extra-contact terms stay: x + 0.0 is not x for x = -0.0
     zero = 0.0
-    F2 = nN1 * sna - Ttr * cna
-    dF2_0 = dN1_0 * sna + nN1 * cna * x30 - dT1_0 * cna + Ttr * sna * x30
-    dF2_1 = dN1_1 * sna + nN1 * cna * x31 - dT1_1 * cna + Ttr * sna * x31
-    dF2_2 = dN1_2 * sna + nN1 * cna * x32 - dT1_2 * cna + Ttr * sna * x32
+    F2 = nN1 * sna - nT1 * cna
+    dF2_0 = dN1_0 * sna + nN1 * cna * x30 - dT1_0 * cna + nT1 * sna * x30
+    dF2_1 = dN1_1 * sna + nN1 * cna * x31 - dT1_1 * cna + nT1 * sna * x31
+    dF2_2 = dN1_2 * sna + nN1 * cna * x32 - dT1_2 * cna + nT1 * sna * x32
     PP1 = 2.0 * nN2 + zero
     PP2 = 2.0 * F2 + 2.0 * zero
     wS1 = w * (PP1 * nl1)
@@ -89,13 +130,13 @@ def _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_o
     dS2_0 = (2.0 * dF2_0 + 2.0 * zero) * nl2 + PP2 * g20
     dS2_1 = (2.0 * dF2_1 + 2.0 * zero) * nl2 + PP2 * g21
     dS2_2 = (2.0 * dF2_2 + 2.0 * zero) * nl2 + PP2 * g22
-    # not the common case: open at the start, Coulomb trial violated (only tested when
-    # sliding is allowed), opening, large rotation, an extra contact (NaN: general too)
-    other = (was_open[p, i] | (allow_sliding & (abs(Ttr) >= mu * nN1))
+    # not this case: open at the start, Coulomb trial violated in the elastic pass, opening,
+    # large rotation, an extra contact (NaN: general too)
+    other = (was_open[p, i] | (trial_slides & (not with_sliding))
              | (nN1 < 0.0) | (nN2 < 0.0) | (not (abs(da) < 0.01))
              | (L1 < two_r) | (L2 < two_r) | (nl1 < two_r) | (nl2 < two_r))
-    return (D1 + dd1, d2[p, i] + dd2, alpha[p, i] + da, nN1, Ttr, nN2, nl1, nl2, cna, sna,
-            1.0 if other else 0.0,
+    return (D1 + dd1, d2[p, i] + dd2, alpha[p, i] + da, nN1, nT1, nN2, nl1, nl2, cna, sna,
+            1.0 if other else 0.0, 1.0 if slide else 0.0,
             wS1 * cc + wS2 * ss, wS1 * ss + wS2 * cc, (wS1 - wS2) * cs,
             w * (dS1_0 * cc + dS2_0 * ss), w * (dS1_1 * cc + dS2_1 * ss), w * (dS1_2 * cc + dS2_2 * ss),
             w * (dS1_0 * ss + dS2_0 * cc), w * (dS1_1 * ss + dS2_1 * cc), w * (dS1_2 * ss + dS2_2 * cc),
@@ -103,39 +144,67 @@ def _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_o
 
 
 @njit(cache=True, error_model="numpy")
-def _common_case(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                 cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                 o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
-                 fast):
-    """``_common_hexagon`` for every orientation of point ``p``: stores the ten new hexagon fields
-    in the ``o_*`` arrays (and sliding = open = False) and, in ``fast`` (13, n_dir), the flag
-    (row 0), stress terms (rows 1-3) and tangent terms (rows 4-12, row-major).
+def _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
+               cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, with_sliding,
+               o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
+               fast):
+    """The fast pass of point ``p``: ``_closed_hexagon`` for every orientation, elastic only or
+    (``with_sliding``) elastic and sliding. Stores the ten new hexagon fields and the sliding
+    flags in the ``o_*`` arrays (open = False) and, in ``fast`` (14, n_dir), the flag ``other``
+    (row 0), the stress terms (rows 1-3), the tangent terms (rows 4-12, row-major) and ``slide``
+    (row 13).
 
     Written for the compiler's loop vectorizer (SIMD over orientations): no branch, and each loop
     stores at most eight arrays (beyond that its run-time overlap checks rule vectorization out;
-    the common update is cheap, so each loop repeats it and the compiler keeps what that loop
-    stores). error_model="numpy": 1/0 gives inf instead of a branch to a ZeroDivisionError, which
-    would also rule vectorization out; such a hexagon gets a non-finite d_alpha, hence the flag,
-    and the general loop redoes it (with Python's error model)."""
+    the per-hexagon update is cheap, so each loop repeats it and the compiler keeps what that loop
+    stores). The two variants are the same loops with ``with_sliding`` written as a literal (a
+    constant the compiler folds: Numba cannot inline a function with these loops, which would
+    carry it as an argument). error_model="numpy": 1/0 gives inf instead of a branch to a
+    ZeroDivisionError, which would also rule vectorization out; such a hexagon gets a non-finite
+    d_alpha, hence the flag, and the general loop redoes it (with Python's error model)."""
     ndir = d1.shape[1]
+    if with_sliding:
+        for i in range(ndir):
+            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                                True)
+            o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
+            o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
+        for i in range(ndir):
+            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                                True)
+            o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
+            fast[0, i] = h[10]; fast[1, i] = h[12]; fast[2, i] = h[13]; fast[3, i] = h[14]
+            fast[4, i] = h[15]; fast[5, i] = h[16]
+        for i in range(ndir):
+            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                                True)
+            fast[6, i] = h[17]; fast[7, i] = h[18]; fast[8, i] = h[19]; fast[9, i] = h[20]
+            fast[10, i] = h[21]; fast[11, i] = h[22]; fast[12, i] = h[23]; fast[13, i] = h[11]
+    else:
+        for i in range(ndir):
+            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                                False)
+            o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
+            o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
+        for i in range(ndir):
+            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                                False)
+            o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
+            fast[0, i] = h[10]; fast[1, i] = h[12]; fast[2, i] = h[13]; fast[3, i] = h[14]
+            fast[4, i] = h[15]; fast[5, i] = h[16]
+        for i in range(ndir):
+            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                                False)
+            fast[6, i] = h[17]; fast[7, i] = h[18]; fast[8, i] = h[19]; fast[9, i] = h[20]
+            fast[10, i] = h[21]; fast[11, i] = h[22]; fast[12, i] = h[23]; fast[13, i] = h[11]
     for i in range(ndir):
-        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
-        o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
-        o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
-    for i in range(ndir):
-        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
-        o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
-        fast[0, i] = h[10]; fast[1, i] = h[11]; fast[2, i] = h[12]; fast[3, i] = h[13]
-        fast[4, i] = h[14]; fast[5, i] = h[15]
-    for i in range(ndir):
-        h = _common_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding)
-        fast[6, i] = h[16]; fast[7, i] = h[17]; fast[8, i] = h[18]; fast[9, i] = h[19]
-        fast[10, i] = h[20]; fast[11, i] = h[21]; fast[12, i] = h[22]
-    for i in range(ndir):
-        o_sliding[p, i] = False
+        o_sliding[p, i] = fast[13, i] != 0.0
         o_open[p, i] = False
 
 
@@ -161,29 +230,39 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     P0 = 0.0; P1 = 0.0; P2 = 0.0
     q0 = 0.0; q1 = 0.0; q2 = 0.0
     w2 = 0.0; w2n = 0.0; w2t = 0.0
-    # The common case first (closed at both ends of the step, elastic, no extra contact, small
-    # rotation: every hexagon of the isotropic state), vectorized: ``_common_case`` stores the new
-    # hexagon fields and, in ``fast``, a flag (row 0) for the hexagons that are not in it, the
-    # stress (rows 1-3) and tangent (rows 4-12) terms of the others. The loop below redoes the
-    # flagged hexagons the general way and sums the terms in the orientation order, as it would
-    # without the common case (the same operations, so the same bits).
-    # Worth it when at least half the hexagons start closed (else most of its work is discarded;
-    # either way the results are the same bits).
+    # The fast pass first (``_fast_pass``: closed at both ends of the step, no extra contact,
+    # small rotation, elastic or sliding: every hexagon of the isotropic state, and most closed
+    # hexagons of a loaded one), vectorized: it stores the new hexagon fields and, in ``fast``, a
+    # flag (row 0) for the hexagons that are not in it, the stress (rows 1-3) and tangent (rows
+    # 4-12) terms of the others. The loop below redoes the flagged hexagons the general way and
+    # sums the terms in the orientation order, as it would without the fast pass (the same
+    # operations, so the same bits). Worth it when at least half the hexagons start closed (else
+    # most of its work is discarded; either way the results are the same bits). The extras are
+    # the general loop's only: with ``extras`` every hexagon goes through it (the tests compare
+    # the fast pass against it that way). The sliding variant of the pass (the Coulomb solve
+    # computed for every hexagon) only where a closed hexagon starts at the Coulomb limit,
+    # |T1| >= mu N1 (exactly the hexagons that slid in the step that made the state: their
+    # T1 = +-mu N1); elsewhere the elastic variant, which leaves a hexagon that starts to slide
+    # to the general loop. The same bits either way: only the time differs.
     n_closed = 0
+    n_limit = 0
     if not extras:
         for i in range(ndir):
             if not was_open[p, i]:
                 n_closed += 1
-    common = 2 * n_closed >= ndir and not extras
-    fast = np.empty((13, ndir))
-    if common:
-        _common_case(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                     cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                     o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
-                     o_sliding, o_open, fast)
+                if abs(T1[p, i]) >= mu * N1[p, i]:
+                    n_limit += 1
+    use_fast = 2 * n_closed >= ndir and not extras
+    fast = np.empty((14, ndir))
+    with_sliding = allow_sliding and n_limit > 0
+    if use_fast:
+        _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
+                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, with_sliding,
+                   o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
+                   o_sliding, o_open, fast)
     for i in range(ndir):
-        if common and fast[0, i] == 0.0:
-            # common case: the new fields are stored already
+        if use_fast and fast[0, i] == 0.0:
+            # fast pass: the new fields are stored already
             s0 += fast[1, i]
             s1 += fast[2, i]
             s2 += fast[3, i]

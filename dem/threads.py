@@ -12,8 +12,14 @@ can change during a run.  ``auto``:
 * above, it times every ``advance`` call (wall clock, particle-steps per second) and runs with
   whichever of 1 and ``max_threads`` thread(s) is faster, re-trying the slower choice in a short
   chunk (``TRIAL_STEPS``) after ``RETRY_S`` seconds, the interval doubling (to ``RETRY_MAX_S``)
-  each time the trial loses.  The cost of a losing trial is bounded by a few tenths of a second
-  per retry interval, so a run is never much slower than on one thread, however the load moves.
+  each time the trial loses.  The first chunk of each count is not measured (it loads the
+  kernels and wakes the thread pool: a cold 3-step chunk measured 15 times too slow).  Once
+  all threads have won a trial they run chunks of ``2 TRIAL_STEPS`` steps, doubling while
+  they stay faster, and not whole chunks to the next neighbour rebuild at once: a 3-step trial
+  can win by chance while a busy process takes the other core, and a 640-step chunk at the 12x
+  slowdown of two threads then cost 4 s (measured: auto at 0.24x one thread over a
+  2000-step run).  The cost of a wrong choice is thus bounded by a few tenths of a second per
+  retry interval, so a run is never much slower than on one thread, however the load moves.
 
 The figures behind the constants are printed by ``python bench/bench_dem.py`` (one thread
 against ``auto`` at 300, 2000 and 12,000 disks, alone and beside a busy process).
@@ -77,6 +83,8 @@ class ThreadChooser:
         self.retry_at = {}          # threads -> wall time of its next trial
         self.retry_s = {}           # threads -> current retry interval [s]
         self.trials = 0             # trial chunks run (reported by the bench)
+        self.warm = set()           # thread counts whose first (unmeasured) chunk has run
+        self.span = 2 * TRIAL_STEPS  # steps of the next chunk on all threads (doubles)
 
     def _other(self, k):
         return self.max_threads if k == 1 else 1
@@ -86,16 +94,22 @@ class ThreadChooser:
         if not self.adaptive:
             return self.current, left
         for k in (1, self.max_threads):
-            if k not in self.rate:                      # measure both choices first
+            if k not in self.rate:                      # warm up, then measure both first
                 return k, min(left, TRIAL_STEPS)
         other = self._other(self.current)
         if time.perf_counter() >= self.retry_at.get(other, 0.0):
             return other, min(left, TRIAL_STEPS)
+        if self.current != 1:
+            return self.current, min(left, self.span)
         return self.current, left
 
     def record(self, threads: int, particle_steps: int, seconds: float):
         """Rate of the chunk just run with ``threads`` threads."""
         if not self.adaptive or particle_steps <= 0:
+            return
+        if threads not in self.warm:                       # warm-up chunk: not a measure
+            self.warm.add(threads)
+            self.trials += 1
             return
         self.rate[threads] = particle_steps / max(seconds, 1e-9)
         now = time.perf_counter()
@@ -106,6 +120,7 @@ class ThreadChooser:
             self.trials += 1
             if self.rate[threads] > self.rate[self._other(threads)]:
                 self.current = threads
+                self.span = 2 * TRIAL_STEPS
                 self.retry_s[self._other(threads)] = RETRY_S
             else:                                          # it lost: wait longer next time
                 self.retry_s[threads] = min(2 * self.retry_s.get(threads, RETRY_S / 2),
@@ -116,3 +131,5 @@ class ThreadChooser:
             # the current choice got slower than the other's last measurement (the load
             # changed): try the other one now rather than switch on an old figure
             self.retry_at[self._other(threads)] = now
+        elif threads != 1:
+            self.span *= 2                                 # all threads confirmed: longer chunks

@@ -22,6 +22,7 @@ def drive(monkeypatch, seconds_per_step, steps=20_000, chunk=640, lucky=()):
     clock = Clock()
     monkeypatch.setattr(T.time, "perf_counter", clock)
     monkeypatch.setattr(T, "available_threads", lambda: 2)
+    monkeypatch.setattr(T, "_default", None)      # auto, whatever an earlier test set
     ch = T.ThreadChooser(12_000, None)
     assert ch.adaptive
     left, call, per = steps, 0, {1: 0, 2: 0}

@@ -22,7 +22,7 @@ loop.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import literally, njit, prange
 
 
 @njit(cache=True, inline="always")
@@ -157,52 +157,32 @@ def _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11
     Written for the compiler's loop vectorizer (SIMD over orientations): no branch, and each loop
     stores at most eight arrays (beyond that its run-time overlap checks rule vectorization out;
     the per-hexagon update is cheap, so each loop repeats it and the compiler keeps what that loop
-    stores). The two variants are the same loops with ``with_sliding`` written as a literal (a
-    constant the compiler folds: Numba cannot inline a function with these loops, which would
-    carry it as an argument). error_model="numpy": 1/0 gives inf instead of a branch to a
+    stores). ``with_sliding`` is dispatched as a literal (``numba.literally``: one compiled
+    variant per value, the callers pass True or False), so the compiler folds it and the elastic
+    variant carries no Coulomb solve. error_model="numpy": 1/0 gives inf instead of a branch to a
     ZeroDivisionError, which would also rule vectorization out; such a hexagon gets a non-finite
     d_alpha, hence the flag, and the general loop redoes it (with Python's error model)."""
+    literally(with_sliding)      # one compiled variant per value: the literal folds
     ndir = d1.shape[1]
-    if with_sliding:
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                                True)
-            o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
-            o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                                True)
-            o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
-            fast[0, i] = h[10]; fast[1, i] = h[12]; fast[2, i] = h[13]; fast[3, i] = h[14]
-            fast[4, i] = h[15]; fast[5, i] = h[16]
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                                True)
-            fast[6, i] = h[17]; fast[7, i] = h[18]; fast[8, i] = h[19]; fast[9, i] = h[20]
-            fast[10, i] = h[21]; fast[11, i] = h[22]; fast[12, i] = h[23]; fast[13, i] = h[11]
-    else:
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                                False)
-            o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
-            o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                                False)
-            o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
-            fast[0, i] = h[10]; fast[1, i] = h[12]; fast[2, i] = h[13]; fast[3, i] = h[14]
-            fast[4, i] = h[15]; fast[5, i] = h[16]
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                                False)
-            fast[6, i] = h[17]; fast[7, i] = h[18]; fast[8, i] = h[19]; fast[9, i] = h[20]
-            fast[10, i] = h[21]; fast[11, i] = h[22]; fast[12, i] = h[23]; fast[13, i] = h[11]
+    for i in range(ndir):
+        h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                            with_sliding)
+        o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
+        o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
+    for i in range(ndir):
+        h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                            with_sliding)
+        o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
+        fast[0, i] = h[10]; fast[1, i] = h[12]; fast[2, i] = h[13]; fast[3, i] = h[14]
+        fast[4, i] = h[15]; fast[5, i] = h[16]
+    for i in range(ndir):
+        h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
+                            e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
+                            with_sliding)
+        fast[6, i] = h[17]; fast[7, i] = h[18]; fast[8, i] = h[19]; fast[9, i] = h[20]
+        fast[10, i] = h[21]; fast[11, i] = h[22]; fast[12, i] = h[23]; fast[13, i] = h[11]
     for i in range(ndir):
         o_sliding[p, i] = fast[13, i] != 0.0
         o_open[p, i] = False
@@ -255,9 +235,14 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     use_fast = 2 * n_closed >= ndir and not extras
     fast = np.empty((14, ndir))
     with_sliding = allow_sliding and n_limit > 0
-    if use_fast:
+    if use_fast and with_sliding:
         _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, with_sliding,
+                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, True,
+                   o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
+                   o_sliding, o_open, fast)
+    elif use_fast:
+        _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
+                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, False,
                    o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
                    o_sliding, o_open, fast)
     for i in range(ndir):

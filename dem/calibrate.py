@@ -794,8 +794,5 @@ def _search_figure(out_dir, space, records, best):
 
 
 def _save(fig, out_dir, name):
-    import matplotlib.pyplot as plt
-    tmp = os.path.join(out_dir, ".tmp-" + name)
-    fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    os.replace(tmp, os.path.join(out_dir, name))
+    from hmodel.io import save_figure       # the project's one atomic figure writer
+    save_figure(fig, os.path.join(out_dir, name), dpi=120)

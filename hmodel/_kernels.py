@@ -472,13 +472,23 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
         t10 += w * (dS1_0 * ss + dS2_0 * cc); t11 += w * (dS1_1 * ss + dS2_1 * cc); t12 += w * (dS1_2 * ss + dS2_2 * cc)
         t20 += w * (dS1_0 - dS2_0) * cs; t21 += w * (dS1_1 - dS2_1) * cs; t22 += w * (dS1_2 - dS2_2) * cs
         if extras:
-            # Lagrangian increment T1 = dPi: forces change at the start geometry (Eq. 32)
-            DN1 = nN1 - n1
-            DT1 = nT1 - t1
-            DN2 = nN2 - n2
+            # Lagrangian increment T1 = dPi: forces change at the start geometry (Eq. 32).
+            # A hexagon closed at both ends takes the law's increments directly: as differences
+            # of the new and old forces (nN1 - n1) they would carry the old forces' rounding,
+            # eps |N1|, a relative error ~ 1/|de| that breaks the micro = macro identity at small
+            # increments (1e-10 at |de| = 1e-8); these satisfy the linearized equilibrium (row 3
+            # of the 3x3 system) to the increments' own rounding.
+            if not was_open[p, i] and closed_end:
+                DN1 = -kn * dd1
+                DN2 = -kn * dd2
+                DT1 = (xi * mu * n1 - t1) + xi * mu * DN1 if slide else kt * D1 * da
+            else:
+                DN1 = nN1 - n1
+                DT1 = nT1 - t1
+                DN2 = nN2 - n2
             DF2 = DN1 * sa + n1 * ca * da - DT1 * ca + t1 * sa * da
-            Df14 = f14 - f14_0
-            Df26 = f26 - f26_0
+            Df14 = -kn * dl1 if (L1 < two_r and nl1 < two_r) else f14 - f14_0
+            Df26 = -kn * dl2 if (L2 < two_r and nl2 < two_r) else f26 - f26_0
             DP1 = 2.0 * DN2 + Df14
             DP2 = 2.0 * DF2 + 2.0 * Df26
             wA = w * DP1 * L1

@@ -258,13 +258,22 @@ def _task(args):
 def state_fingerprint(state: State) -> str:
     """SHA-256 (hex) of what a probe starts from: positions, velocities, spins, walls, the
     pair list with its history, the step and the parameters. Two states with the same
-    fingerprint give the same probe results (the kernels are deterministic)."""
+    fingerprint give the same probe results (the kernels are deterministic).  Without rolling
+    resistance (mu_r = 0 and no moment history: the run is then the same to the bit whatever
+    ``rolling_stiffness``) the rolling fields are left out, so the fingerprint is the one of
+    the code before rolling resistance existed and earlier checkpoints stay valid."""
+    rolling = bool(state.params.rolling_friction != 0 or state.mu_r != 0 or np.any(state.mr))
     h = hashlib.sha256()
     for a in (state.x, state.v, state.w, state.theta, state.r, state.walls, state.walls_ref,
-              state.prev, state.x_ref, state.pi, state.pj, state.ft, state.mr, state.ref_len):
+              state.prev, state.x_ref, state.pi, state.pj, state.ft) + (
+                  (state.mr,) if rolling else ()) + (state.ref_len,):
         h.update(np.ascontiguousarray(a).tobytes())
-    h.update(json.dumps([state.params.to_dict(), state.step, state.mu, state.mu_r, state.cap_on,
-                         list(state.control)], default=str).encode())
+    params = state.params.to_dict()
+    if not rolling:
+        params = {k: v for k, v in params.items()
+                  if k not in ("rolling_friction", "rolling_stiffness")}
+    h.update(json.dumps([params, state.step, state.mu] + ([state.mu_r] if rolling else [])
+                        + [state.cap_on, list(state.control)], default=str).encode())
     return h.hexdigest()
 
 

@@ -179,6 +179,34 @@ def test_version_1_state_files_still_read(small_sample, tmp_path):
         io.load_state(bad)
 
 
+def _fingerprint_before_rolling(state):
+    # dem.probes.state_fingerprint as it was written before rolling resistance existed
+    import hashlib
+    h = hashlib.sha256()
+    for a in (state.x, state.v, state.w, state.theta, state.r, state.walls, state.walls_ref,
+              state.prev, state.x_ref, state.pi, state.pj, state.ft, state.ref_len):
+        h.update(np.ascontiguousarray(a).tobytes())
+    pd = {k: v for k, v in state.params.to_dict().items()
+          if k not in ("rolling_friction", "rolling_stiffness")}
+    h.update(json.dumps([pd, state.step, state.mu, state.cap_on, list(state.control)],
+                        default=str).encode())
+    return h.hexdigest()
+
+
+def test_fingerprint_of_a_state_without_rolling_is_the_one_before_rolling(small_sample):
+    # the probe checkpoints of runs made before rolling resistance existed stay resumable: a
+    # state without it (mu_r = 0, no moment history; any rolling_stiffness, which then changes
+    # no bit) hashes as it did; with it, the rolling fields count
+    from dem.probes import state_fingerprint
+    fp = state_fingerprint(small_sample)
+    assert fp == _fingerprint_before_rolling(small_sample)
+    assert state_fingerprint(_with_rolling(small_sample, 0.0, 7.5)) == fp
+    assert state_fingerprint(_with_rolling(small_sample)) != fp
+    st = _run(_with_rolling(small_sample)).state()
+    assert np.any(st.mr)
+    assert state_fingerprint(st._replace(mr=np.zeros_like(st.mr))) != state_fingerprint(st)
+
+
 @pytest.mark.parametrize("field, value", [("rolling_friction", -0.1),
                                           ("rolling_friction", math.nan),
                                           ("rolling_stiffness", 0.0),

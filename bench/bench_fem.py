@@ -13,7 +13,9 @@ the FE's constitutive rate at least 0.8 x the batch baseline. Every indicator at
 OpenBLAS runs on one thread here (OPENBLAS_NUM_THREADS=1, set before numpy is imported): SuperLU and
 ARPACK on ~10^3 dofs are too small for BLAS threads, which on a shared 2-core machine fight the
 material kernel's threads for the cores (the global check also sets it itself, fem.indicators).
-The machine's load average is printed before and after the run.
+The machine's load average is printed before and after the run. Kernels missing from Numba's
+cache are compiled before the timed run (as the CLI does), so that a first run after an edit does
+not count their compilation.
 """
 from __future__ import annotations
 
@@ -32,6 +34,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from hmodel import HParams, update, broadcast_state          # noqa: E402
 from hmodel.driver import isotropic_state                    # noqa: E402
 from fem.biaxial import BiaxialConfig, run_biaxial, format_summary   # noqa: E402
+from fem.__main__ import _fem_kernels, _warm_indicators             # noqa: E402
+from hmodel.experiment import compile_kernels                       # noqa: E402
 
 
 def baseline_rates(params: HParams, npts: int, reps: int = 200, batch_reps: int = 20):
@@ -104,6 +108,8 @@ def main(argv=None):
                         fields=not a.no_fields)
     params = cfg.params()
     npts = a.nx * a.ny * 4
+    # kernels not in Numba's cache (a first run, an edited module) compile here, not in the run
+    compile_kernels(extra=_fem_kernels(), warm=_warm_indicators)
     single, batch = baseline_rates(params, npts)
     print("load average (1, 5, 15 min) before: %.2f %.2f %.2f" % os.getloadavg())
     print(f"cores: {os.cpu_count()}, problem: {a.nx} x {a.ny} quads, {npts} points, n_dir {a.n_dir}, "

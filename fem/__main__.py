@@ -106,10 +106,11 @@ def check_config(cfg: BiaxialConfig) -> None:
 def _warm_indicators():
     """Compile fem's own kernels on tiny cases: the local indicators on one elastic point, the
     adapter's flag counts (and hmodel's update kernel through it, both drivers) on 70 and 4
-    points of 8 orientations, the stiffness sum on one element."""
+    points of 8 orientations, the stiffness on one element, the global check's banded kernels
+    on 2 x 4 elements."""
     from hmodel import HParams
     from .adapter import MaterialField
-    from .indicators import local_indicators
+    from .indicators import GlobalCheck, local_indicators
     from .mesh import rectangle
     from .problem import Biaxial
     I = np.eye(2)
@@ -122,6 +123,8 @@ def _warm_indicators():
         t = mf.trial(np.zeros((2, 2, n)))
         mf.pattern_changes(t, t)
     Biaxial(rectangle(1.0, 1.0, 1, 1), p).stiffness(D[..., [0] * 4])
+    b = Biaxial(rectangle(1.0, 2.0, 2, 4), p)
+    GlobalCheck(b)(b.stiffness(D[..., [0] * b.npts]))
 
 
 def _fem_kernels():

@@ -278,17 +278,18 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
             logf.flush()
         emit(res.trial, res.f_int, info)
 
-    # row 0: the isotropic initial state, tangent of a zero increment
-    trial0 = prob.material.trial(np.zeros((2, 2, prob.npts)))
-    zero = np.zeros(prob.ndofs)
-    emit(trial0, stepper.f_int, {"du": zero, "df_int": zero})
     error = None
     try:
-        stepper.run(cfg.eps1_max, on_step)
-    except RuntimeError as e:
-        error = e
-        log(f"FAILED: {e}")
-    finally:
+        # row 0: the isotropic initial state, tangent of a zero increment
+        trial0 = prob.material.trial(np.zeros((2, 2, prob.npts)))
+        zero = np.zeros(prob.ndofs)
+        emit(trial0, stepper.f_int, {"du": zero, "df_int": zero})
+        try:
+            stepper.run(cfg.eps1_max, on_step)
+        except RuntimeError as e:
+            error = e
+            log(f"FAILED: {e}")
+    finally:        # whatever ends the run (also Ctrl-C, SIGTERM): the writers close, complete
         if writer is not None:
             writer.close()
         if fields is not None:

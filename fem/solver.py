@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from .problem import Biaxial
+from .problem import Biaxial, PatternGather
 
-__all__ = ["NewtonError", "StepResult", "newton_step", "LoadStepper"]
+__all__ = ["NewtonError", "StepResult", "FreeSolver", "newton_step", "LoadStepper"]
 
 
 class NewtonError(RuntimeError):
@@ -53,20 +53,51 @@ class StepResult:
         return len(self.residuals) - 1
 
 
-def _solve(A, b):
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", spla.MatrixRankWarning)
-        try:
-            x = spla.splu(A.tocsc()).solve(b)
-        except (RuntimeError, spla.MatrixRankWarning) as e:
-            raise NewtonError(f"singular tangent stiffness ({e})") from None
-    return x
+class FreeSolver:
+    """du = K[free][:, free]^{-1} b for the Newton iterations, step after step: SuperLU's LU
+    (``splu`` of K[free][:, free].tocsc(), COLAMD column order), with the matrix gathered from
+    K.data (``PatternGather``) and the column order found once per sparsity pattern. The first
+    matrix of a pattern is factorized so; its final column order perm_c (COLAMD, then SuperLU's
+    postorder of the elimination tree: both from the pattern alone) is kept, and the next
+    matrices are gathered with their columns in that order and factorized with
+    permc_spec="NATURAL". SuperLU then sees the same columns in the same order (its postorder of
+    an already postordered tree is the identity; checked: perm_c must come back as 0..n-1, else
+    the plain route), so the same pivots and the same bits, without COLAMD at every iteration
+    (5.7 -> 4.4 ms a factorization on the 20 x 40 benchmark's 1679 free dofs)."""
+
+    def __init__(self, free: np.ndarray):
+        self.free = np.asarray(free)
+        free = self.free
+        self._plain = PatternGather(lambda K: K[free][:, free].tocsc())
+        self._ordered = None        # (pattern (indptr, indices), PatternGather, inverse order)
+
+    def solve(self, K, b: np.ndarray) -> np.ndarray:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", spla.MatrixRankWarning)
+            try:
+                o = self._ordered
+                if o is not None and np.array_equal(o[0][0], K.indptr) \
+                        and np.array_equal(o[0][1], K.indices):
+                    lu = spla.splu(o[1](K), permc_spec="NATURAL")
+                    if np.array_equal(lu.perm_c, np.arange(b.size)):
+                        x = np.empty_like(b)
+                        x[o[2]] = lu.solve(b)
+                        return x
+                lu = spla.splu(self._plain(K))
+                inv = np.argsort(lu.perm_c)
+                plain = self._plain
+                self._ordered = ((K.indptr.copy(), K.indices.copy()),
+                                 PatternGather(lambda M: plain(M)[:, inv].tocsc()), inv)
+                return lu.solve(b)
+            except (RuntimeError, spla.MatrixRankWarning) as e:
+                raise NewtonError(f"singular tangent stiffness ({e})") from None
 
 
 def newton_step(prob: Biaxial, u_old: np.ndarray, u_guess: np.ndarray, rtol: float = 1e-10,
-                max_iter: int = 25) -> StepResult:
+                max_iter: int = 25, solver: FreeSolver | None = None) -> StepResult:
     """Equilibrium of the step from the committed displacement ``u_old`` (ndofs,) with the
-    prescribed dofs of ``u_guess`` (ndofs,) already set to their end-of-step values.
+    prescribed dofs of ``u_guess`` (ndofs,) already set to their end-of-step values; ``solver``
+    the linear solver kept from step to step (None: a new one).
 
     Raises NewtonError when not converged in ``max_iter`` iterations or on a non-finite or
     singular system. Nothing is committed here.
@@ -79,6 +110,8 @@ def newton_step(prob: Biaxial, u_old: np.ndarray, u_guess: np.ndarray, rtol: flo
     res, changes = [], []
     times = {"update": 0.0, "assembly": 0.0, "solve": 0.0}
     prev = None
+    if solver is None:
+        solver = FreeSolver(free)
     for k in range(max_iter + 1):
         t0 = time.perf_counter()
         try:
@@ -102,9 +135,8 @@ def newton_step(prob: Biaxial, u_old: np.ndarray, u_guess: np.ndarray, rtol: flo
             break
         t2 = time.perf_counter()
         K = prob.stiffness(trial.D)
-        Kff = K[free][:, free]
         t3 = time.perf_counter()
-        du = _solve(Kff, -r)
+        du = solver.solve(K, -r)            # K[free][:, free]^{-1} (-r)
         times["assembly"] += t3 - t2
         times["solve"] += time.perf_counter() - t3
         u[free] += du
@@ -141,6 +173,7 @@ class LoadStepper:
         self.f_int = prob.internal_force(prob.material.stress())
         self._du_last = None
         self._h_last = None
+        self.solver = FreeSolver(prob.free)
         self.times = {"update": 0.0, "assembly": 0.0, "solve": 0.0, "iterations": 0}
 
     @property
@@ -161,7 +194,8 @@ class LoadStepper:
         cut = 0
         while True:
             try:
-                res = newton_step(self.prob, self.u, self._guess(h), self.rtol, self.max_iter)
+                res = newton_step(self.prob, self.u, self._guess(h), self.rtol, self.max_iter,
+                                  self.solver)
                 break
             except NewtonError as e:
                 if self.log:

@@ -3,6 +3,7 @@ import json
 
 import meshio
 import numpy as np
+import pytest
 
 from fem.output import CURVE_COLUMNS, MODE_FIELDS, read_curve
 
@@ -74,3 +75,98 @@ def test_figure_and_summary(homogeneous_run):
     # the newton log has one line per step with its residual history
     lines = [l for l in (out / "newton.log").read_text().splitlines() if l[:1].isdigit()]
     assert len(lines) == 60
+
+
+def _fields(n_nodes=6, n_cells=2, k=0):
+    pd = {"displacement": np.full((n_nodes, 3), float(k))}
+    cd = {"q": [np.arange(n_cells, dtype=float) + k]}
+    return pd, cd
+
+
+def _mesh():
+    pts = np.array([[0, 0], [1, 0], [2, 0], [0, 1], [1, 1], [2, 1]], dtype=float)
+    return pts, [("quad", np.array([[0, 1, 4, 3], [1, 2, 5, 4]]))]
+
+
+def _steps(path):
+    with meshio.xdmf.TimeSeriesReader(path) as r:
+        r.read_points_cells()
+        return [r.read_data(k) for k in range(r.num_steps)]
+
+
+def test_xdmf_rewrite_throttled_and_complete_at_close(tmp_path):
+    """Between rewrites the XML on disk is the last one written (readable, fewer steps) while
+    fields.h5 holds every step; ``close`` rewrites it with every step; xml_every = 0 rewrites
+    after every step."""
+    from fem.output import FieldWriter
+    pts, cells = _mesh()
+    w = FieldWriter(tmp_path / "f.xdmf", pts, cells, xml_every=1e9)
+    for k in range(3):
+        w.write(0.1 * k, *_fields(k=k))
+        assert _steps(tmp_path / "f.xdmf") == []          # not rewritten yet, still readable
+    import h5py
+    with h5py.File(tmp_path / "f.h5", "r") as h:           # flushed after every step
+        assert len(h.keys()) == 2 + 3 * 2
+    w.close()
+    st = _steps(tmp_path / "f.xdmf")
+    assert [t for t, _, _ in st] == [0.0, 0.1, 0.2]
+    assert all(np.array_equal(pd["displacement"], _fields(k=k)[0]["displacement"])
+               for k, (_, pd, _) in enumerate(st))
+    w = FieldWriter(tmp_path / "g.xdmf", pts, cells, xml_every=0.0)
+    for k in range(3):
+        w.write(0.1 * k, *_fields(k=k))
+        assert len(_steps(tmp_path / "g.xdmf")) == k + 1
+    w.close()
+
+
+def test_killed_writer_leaves_a_readable_pair(tmp_path):
+    """A process killed outright (SIGKILL: no close, no finally) between two XML rewrites: the
+    pair is readable and holds the steps of the last rewrite, with their data."""
+    import subprocess
+    import sys
+    script = f"""
+import os, signal, sys
+import numpy as np
+sys.path.insert(0, {str(__import__('pathlib').Path(__file__).parents[2])!r})
+from tests.fem.test_output import _fields, _mesh
+from fem.output import FieldWriter
+w = FieldWriter({str(tmp_path / 'f.xdmf')!r}, *_mesh(), xml_every=0.0)
+for k in range(2):
+    w.write(0.1 * k, *_fields(k=k))
+w.xml_every = 1e9
+for k in range(2, 5):
+    w.write(0.1 * k, *_fields(k=k))
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert p.returncode == -9, p.stderr
+    st = _steps(tmp_path / "f.xdmf")
+    assert [t for t, _, _ in st] == [0.0, 0.1]
+    for k, (_, pd, cd) in enumerate(st):
+        assert np.array_equal(pd["displacement"], _fields(k=k)[0]["displacement"])
+        assert np.array_equal(cd["q"][0], _fields(k=k)[1]["q"][0])
+
+
+@pytest.mark.parametrize("rows", [1, 4])
+def test_interrupted_run_lists_every_converged_step(tmp_path, monkeypatch, rows):
+    """Ctrl-C (KeyboardInterrupt) after row 0 or in the middle of a run whose XML would not be
+    rewritten before the end: run_biaxial's ``finally`` closes the writer, so fields.xdmf lists
+    every row of curve.csv, readable."""
+    from fem.biaxial import BiaxialConfig, run_biaxial
+    from fem.output import FieldWriter
+    monkeypatch.setattr(FieldWriter, "XML_EVERY", 1e9)
+    seen = []
+
+    def progress(line):
+        if line.startswith("step "):
+            seen.append(line)
+            if len(seen) == rows:
+                raise KeyboardInterrupt
+    cfg = BiaxialConfig(nx=1, ny=2, n_dir=16, eps1_max=0.01, d_eps1=1e-3, n_sphere=20,
+                        mp_reference=False)
+    with pytest.raises(KeyboardInterrupt):
+        run_biaxial(cfg, tmp_path, progress=progress)
+    c = read_curve(tmp_path / "curve.csv")
+    st = _steps(tmp_path / "fields.xdmf")
+    assert len(c["step"]) == rows and len(st) == rows
+    assert np.array_equal([t for t, _, _ in st], c["eps1"])

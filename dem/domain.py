@@ -72,6 +72,9 @@ def state_row(name, meta_row, eta_peak, ref_outcome, rows, state):
         # R itself ran away at constant stress: the state lies above eta_lim
         out["eta_target_min_failed"] = out["eta"]
         return out
+    if ref_outcome == "equilibrium":
+        # R held at constant stress: a target held, whether or not the state is probed
+        out["eta_target_max_held"] = out["eta"]
     if not rows:
         return out
     a = np.array([r["alpha_sigma"] for r in rows])
@@ -87,11 +90,9 @@ def state_row(name, meta_row, eta_peak, ref_outcome, rows, state):
     out["failure_directions"] = json.dumps([float(x) for x in a[oc == "failure"]])
     et, _ = target_etas(rows, state)
     if eq.any():
-        out["eta_target_max_held"] = float(et[eq].max())
+        out["eta_target_max_held"] = float(np.nanmax([out["eta_target_max_held"], et[eq].max()]))
     if (oc == "failure").any():
         out["eta_target_min_failed"] = float(et[oc == "failure"].min())
-    if ref_outcome == "equilibrium":
-        out["eta_target_max_held"] = float(np.nanmax([out["eta_target_max_held"], out["eta"]]))
     return out
 
 

@@ -121,3 +121,22 @@ def test_boundaries_and_an_eta_lim_that_depends_on_the_direction():
     b2 = boundaries(rows[:2] + [_row("c", 0.86, n_failure=3, held=0.86, failed=0.8639)], 0.8844)
     assert b2["eta_lim_bracket_consistent"]
     assert eta_lim_text(b2).startswith("eta_lim in [0.8600, 0.8639]")
+
+
+def test_a_held_reference_counts_as_a_target_held_even_unprobed():
+    # the full cross-check probes one state only: a state above it whose reference held at
+    # constant stress still bounds eta_lim from below (the full run: f0.97 held at 0.8966 while
+    # a probe target of 0.8942 from f0.95 ran away: no single eta_lim)
+    from types import SimpleNamespace
+    from dem.domain import boundaries, eta_lim_text, state_row
+    st = lambda s1, s2: SimpleNamespace(control=SimpleNamespace(s_to=(s2, s1)))
+    held = state_row("hi", {"eps1": "0.0027"}, 0.9233, "equilibrium", [], st(529000.0, 200000.0))
+    assert held["probed"] is False and held["eta_target_max_held"] == held["eta"]
+    failed = state_row("top", {"eps1": "0.0088"}, 0.9233, "failure", [], st(550000.0, 200000.0))
+    assert failed["eta_target_min_failed"] == failed["eta"]
+    assert math.isnan(failed["eta_target_max_held"])
+    probed = _row("lo", 0.8836, n_failure=1, min_w2=0.099, held=0.8941, failed=0.8942)
+    b = boundaries([probed, held, failed], 0.9233)
+    assert b["eta_lim_low"] == held["eta"] and b["eta_lim_high"] == 0.8942
+    assert not b["eta_lim_bracket_consistent"] and "no single eta_lim" in eta_lim_text(b)
+

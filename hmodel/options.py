@@ -178,20 +178,50 @@ class Terminated(BaseException):
     """SIGTERM, raised in the main thread like KeyboardInterrupt for Ctrl-C."""
 
 
+def _in_numba_callback(frame) -> bool:
+    """True if ``frame`` runs inside Numba's unpickling callback. Compiled code calls it from C
+    (to box every returned array, among others), and Numba's tuple boxing goes on past a failed
+    element: an exception raised there comes out as ``SystemError: ... returned a result with an
+    exception set`` instead of itself."""
+    from numba.core.serialize import _numba_unpickle
+    code = _numba_unpickle.__code__
+    while frame is not None:
+        if frame.f_code is code:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _interrupt_handler(exc_type):
+    """A signal handler raising ``exc_type`` in the main thread, or, if the signal lands inside a
+    callback of compiled code, sending the signal again 5 ms later (that callback returns in
+    microseconds, so the exception is raised in Python code)."""
+    def handler(signum, frame):
+        if "numba.core.serialize" in sys.modules and _in_numba_callback(frame):
+            again = threading.Timer(0.005, signal.pthread_kill,
+                                    (threading.main_thread().ident, signum))
+            again.daemon = True
+            again.start()
+            return
+        raise exc_type()
+    return handler
+
+
 @contextmanager
 def _sigterm_raises():
+    """SIGTERM raises Terminated and SIGINT KeyboardInterrupt (unless SIGINT is ignored), never
+    inside a callback of compiled code (see ``_in_numba_callback``)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-
-    def handler(signum, frame):
-        raise Terminated()
-
-    old = signal.signal(signal.SIGTERM, handler)
+    old = {signal.SIGTERM: signal.signal(signal.SIGTERM, _interrupt_handler(Terminated))}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        old[signal.SIGINT] = signal.signal(signal.SIGINT, _interrupt_handler(KeyboardInterrupt))
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, old)
+        for signum, handler in old.items():
+            signal.signal(signum, handler)
 
 
 def run_cli(parser, argv, run, errors=(ValueError,)) -> int:

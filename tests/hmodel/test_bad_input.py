@@ -208,3 +208,56 @@ def test_library_refuses_eta_and_sigma_norm_out_of_range(state_A):
     for norm in (0.0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="sigma_norm"):
             stress_probes(state_A, HParams(), [0.0], sigma_norm=norm)
+
+
+_SIGNAL_IN_NUMBA_CALLBACK = r"""
+import os, signal, sys
+import numpy as np, numba
+import numba.core.serialize as S
+from hmodel.options import Parser, run_cli
+
+@numba.njit
+def two_arrays(a):
+    return a.copy(), a.copy()
+
+a = np.zeros(3)
+two_arrays(a)
+
+# Numba's unpickling callback, which compiled code calls from C to box each returned array, sends
+# the signal to its own process on its 3rd call: the handler then runs with that callback on the
+# stack, between the first and the second array of the tuple being boxed. (The C helper keeps the
+# function object, so its code is swapped in place; the globals are those of numba's module.)
+S._calls, S._signum, S._os = [0], int(sys.argv[1]), os
+def callback(address, bytedata, hashed):
+    _calls[0] += 1
+    if _calls[0] == 3:
+        _os.kill(_os.getpid(), _signum)
+    key = (address, hashed)
+    try:
+        obj = _unpickled_memo[key]
+    except KeyError:
+        _unpickled_memo[key] = obj = cloudpickle.loads(bytedata)
+    return obj
+S._numba_unpickle.__code__ = callback.__code__
+
+def run(args, stage):
+    stage.at("the loop")
+    while True:
+        two_arrays(a)
+
+sys.exit(run_cli(Parser(), [], run))
+"""
+
+
+@pytest.mark.parametrize("sig,name,code", [(signal.SIGTERM, "SIGTERM", 143),
+                                           (signal.SIGINT, "Ctrl-C", 130)])
+def test_a_signal_inside_numbas_callback_is_still_one_line(sig, name, code):
+    # CI met this one: Numba's tuple boxing carries on past a failed element, so an exception
+    # raised inside its callback came out as a SystemError with a traceback, exit 1
+    import subprocess
+    import sys
+    p = subprocess.run([sys.executable, "-c", _SIGNAL_IN_NUMBA_CALLBACK, str(int(sig))],
+                       capture_output=True, text=True, timeout=120,
+                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert p.returncode == code, p.stderr
+    assert p.stderr.strip() == f"interrupted ({name}) during the loop; no output written yet"

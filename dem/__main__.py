@@ -193,7 +193,8 @@ def cmd_crosscheck(a):
     c, timings = run_crosscheck(a.out, full=a.full, n=a.n, seed=a.seed, rate=a.rate,
                                 workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
                                 dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
-                                dem_domain=a.dem_domain, dem_params=a.dem_params)
+                                dem_domain=a.dem_domain, dem_params=a.dem_params,
+                                scheduler=a.scheduler)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
@@ -350,7 +351,11 @@ def main(argv=None):
     x.add_argument("--seed", type=opt.integer(0), default=1)
     x.add_argument("--rate", type=opt.real(0, 10), default=None, help="DEM axial strain rate [1/s] (0.05, 0.01 with --full)")
     x.add_argument("--max-steps", type=opt.integer(1), default=None, help="cap of each DEM probe run [steps]")
-    x.add_argument("--workers", type=opt.integer(1, 1024), default=None, help="local processes for the probes")
+    x.add_argument("--workers", type=opt.integer(1, 1024), default=None,
+                   help="local processes for the DEM's relaxations and probes")
+    x.add_argument("--scheduler", default=None,
+                   help="dask.distributed scheduler address for the DEM's relaxations and probes "
+                        "(one task a run)")
     x.add_argument("--skip-dem", action="store_true", help="H-model and FE only")
     x.add_argument("--no-domain", action="store_true", help="skip the H-model bifurcation domain")
     x.add_argument("--threads", type=THREADS, default=None,
@@ -366,8 +371,11 @@ def main(argv=None):
     def run(a, stage):
         if hasattr(a, "out"):
             opt.check_out_dir(a.out)
-        if a.cmd in ("probes", "domain", "calibrate") and a.scheduler and a.workers:
+        if a.cmd in ("probes", "domain", "calibrate", "crosscheck") and a.scheduler and a.workers:
             raise opt.OptionError("--workers and --scheduler: allowed one of them")
+        if getattr(a, "scheduler", None):
+            from .probes import check_scheduler
+            check_scheduler(a.scheduler)
         if getattr(a, "directions", None):
             _directions(a)            # bad input before the compilation
         stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"

@@ -94,7 +94,7 @@ def comparison_state(refs, norm, alphas):
 
 def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, threads=None,
              alphas=None, max_steps=None, resume=False, domain=True, hmodel_boundary=None,
-             params=None):
+             params=None, scheduler=None):
     """DEM: compaction, drained biaxial test with states saved along the path, their
     relaxation under stress control, and the directional analysis (default: the paper's 45
     directions, each twice) at the comparison state chosen by ``comparison_state``
@@ -103,7 +103,8 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
 
     ``threads``: threads of the compaction, the biaxial test (default: auto; the results do
     not depend on it); the relaxations and probes run one thread each in ``workers``
-    processes.  ``resume``: keep what an interrupted run in ``out_dir`` finished (the biaxial
+    processes, or on the dask.distributed cluster of ``scheduler`` (its address), each run
+    one task: the results do not depend on where a run ran.  ``resume``: keep what an interrupted run in ``out_dir`` finished (the biaxial
     test or its checkpoint, the relaxed references, the probe runs already on disk).
     ``params``: DemParams of the sample (default: the paper's set); n and seed override it.
     """
@@ -149,7 +150,8 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
 
     ddir = os.path.join(out_dir, "domain")
     drows, bounds, probes_by = run_domain(bdir, ddir, alphas=alphas, opts=opts, workers=workers,
-                                          resume=resume, hmodel=hmodel_boundary or False,
+                                          scheduler=scheduler, resume=resume,
+                                          hmodel=hmodel_boundary or False,
                                           choose=choose)
     probes = probes_by[chosen["state"]]
     stages = {"compaction + biaxial test (when it ran)": res.wall_time,
@@ -585,7 +587,7 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
 def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None, skip_dem=False,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
                    dem_max_steps=None, threads=None, resume=False, dem_domain=None,
-                   dem_params=None):
+                   dem_params=None, scheduler=None):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
@@ -595,6 +597,8 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     domain), default on except with ``full`` (there only at the comparison state: the
     12,000-disk domain is ``python -m dem domain``'s job).  ``dem_params``: a DemParams file
     for the DEM sample (default: the paper's stated set); the report names it.
+    ``scheduler``: the address of a dask.distributed scheduler for the DEM's relaxations and
+    probe runs (see ``dem_part``; the H-model's domain stays in local processes).
     """
     from hmodel.io import atomic_open
 
@@ -630,7 +634,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
         dem = dem_part(os.path.join(out_dir, "dem"), n=n, seed=seed, rate=rate, workers=workers,
                        alphas=dem_alphas, max_steps=dem_max_steps, threads=threads,
                        resume=resume, domain=(not full) if dem_domain is None else dem_domain,
-                       hmodel_boundary=hb, params=P)
+                       hmodel_boundary=hb, params=P, scheduler=scheduler)
         n_runs = 2 * sum(len(r) for r in dem["probes_by_state"].values())
         timings[f"DEM ({n} disks: compaction, biaxial, {len(dem['domain_rows'])} relaxations, "
                 f"{n_runs} probe runs)"] = time.time() - t

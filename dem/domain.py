@@ -233,6 +233,39 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
     return drows, b, {todo[k][0]: by[k] for k in by}
 
 
+def makespan(durations, workers: int) -> float:
+    """Wall time of independent runs of the given ``durations`` (in their order) on ``workers``
+    workers, each run going to the first worker free, as a process pool or a dask cluster
+    hands them out: the time the last one ends (same unit as ``durations``)."""
+    if workers < 1:
+        raise ValueError(f"workers={workers!r}; allowed: an integer >= 1")
+    free = [0.0] * int(workers)
+    for d in durations:
+        k = min(range(len(free)), key=free.__getitem__)
+        free[k] += float(d)
+    return max(free)
+
+
+def stage_steps(domain_dir):
+    """The time steps of every run of a finished ``dem domain`` (or cross-check) folder, in
+    the order ``run_domain`` hands them out: (relaxations, elastic runs, sliding runs), lists of
+    step counts (a relaxation from its ``reference_history.csv``, a probe run from
+    ``probes.csv``; the sliding runs start once every elastic run has ended)."""
+    names = sorted(d for d in os.listdir(domain_dir) if d.startswith("state_")
+                   and os.path.isdir(os.path.join(domain_dir, d)))
+    relax, elastic, sliding = [], [], []
+    for name in names:
+        _, hist = io.read_csv(os.path.join(domain_dir, name, "reference_history.csv"))
+        if hist:
+            relax.append(hist[-1]["step"] - hist[0]["step"])
+        pfile = os.path.join(domain_dir, name, "probes.csv")
+        if os.path.exists(pfile):
+            _, rows = io.read_csv(pfile)
+            elastic += [r["steps_elastic"] for r in rows]
+            sliding += [r["steps"] for r in rows]
+    return relax, elastic, sliding
+
+
 def hmodel_boundary(sigma2):
     """The H-model's lower boundary (first W2 <= 0 and W2_sigma <= 0) and peak on the drained
     path at ``sigma2`` [Pa] (Table I parameters, p = (s1 + s2)/2)."""

@@ -386,6 +386,32 @@ def run_probe_sets(sets, opts: ProbeOptions = ProbeOptions(), workers=None, sche
     return [combine(list(o.values()), opts) for o in outs]
 
 
+def check_scheduler(address: str, timeout: float = 5.0) -> None:
+    """Refuse, before any computation, a ``--scheduler`` address that is malformed, needs a
+    missing dask.distributed, or where nothing listens (a TCP connection within ``timeout``
+    seconds): ValueError with one line naming the option. (A dask Client that fails to connect
+    also prints a traceback from its finalizer, hence the plain socket.)"""
+    import socket
+    try:
+        from distributed.comm.addressing import parse_address, parse_host_port
+    except ImportError as e:
+        raise ValueError("--scheduler needs dask.distributed (pip install "
+                         "'granular-w2[distributed]')") from e
+    try:
+        scheme, loc = parse_address(address)
+        if scheme != "tcp":
+            return          # inproc://, ucx://...: nothing to check with a socket
+        host, port = parse_host_port(loc)
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"--scheduler {address!r}: not an address (allowed: "
+                         f"tcp://HOST:PORT or HOST:PORT): {e}") from e
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as e:
+        raise ValueError(f"--scheduler {address!r}: nothing answers there within {timeout:g} s "
+                         f"({e.strerror or type(e).__name__})") from e
+
+
 def _map(tasks, collect, workers, scheduler, fn=None):
     """Run ``fn`` (default ``_task``) over the (tag, args) ``tasks`` locally or on dask;
     ``collect(tag, result)`` each result as it comes."""

@@ -34,6 +34,12 @@ CASES = [
     (["probes", "--state", "S", "--directions", "10,10"], "--directions"),
     (["domain", "--biaxial", "B", "--strain-tol", "nan"], "--strain-tol"),
     (["crosscheck", "--workers", "0"], "--workers"),
+    # a scheduler address is checked before anything runs (port 1 of this machine: refused)
+    (["crosscheck", "--scheduler", "nonsense"], "--scheduler"),
+    (["crosscheck", "--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),
+    (["crosscheck", "--scheduler", "tcp://127.0.0.1:1", "--workers", "2"], "--scheduler"),
+    (["domain", "--biaxial", "B", "--scheduler", "127.0.0.1:1"], "--scheduler"),
+    (["probes", "--state", "S", "--scheduler", "tcp://127.0.0.1:x"], "--scheduler"),
 ]
 
 
@@ -84,3 +90,12 @@ def test_interrupt_is_one_line(tmp_path, sig, code):
                               "[biaxial] step", sig=sig)
     assert rc == code
     assert len(err) == 1 and err[0].startswith("interrupted") and "--resume" in err[0], err
+
+
+def test_scheduler_without_dask_distributed_is_one_line(monkeypatch, tmp_path, capsys):
+    import sys
+    monkeypatch.setitem(sys.modules, "distributed.comm.addressing", None)   # import fails
+    code, err = _run(["crosscheck", "--scheduler", "tcp://127.0.0.1:8786", "--out",
+                      str(tmp_path / "o")], capsys)
+    assert code == 2 and len(err) == 1 and "--scheduler needs dask.distributed" in err[0], err
+    assert not (tmp_path / "o").exists()

@@ -100,6 +100,28 @@ def test_domain_end_to_end_resume_and_dask(biaxial_dir, tmp_path, monkeypatch):
     assert (out2 / "domain_probes.csv").read_bytes() == first_probes
 
 
+def test_crosscheck_sends_the_dem_runs_to_the_scheduler(biaxial_dir, tmp_path, monkeypatch):
+    # the cross-check's relaxations and probes go through run_domain, whose dask path is the
+    # one checked above: here, that the cross-check hands it the scheduler (and workers=None)
+    import shutil
+    import dem.domain
+    from dem.crosscheck import dem_part
+    shutil.copytree(biaxial_dir, tmp_path / "dem" / "biaxial")
+    seen = {}
+
+    class Sent(Exception):
+        pass
+
+    def fake_run_domain(*args, **kw):
+        seen.update(kw)
+        raise Sent
+    monkeypatch.setattr(dem.domain, "run_domain", fake_run_domain)
+    with pytest.raises(Sent):
+        dem_part(str(tmp_path / "dem"), n=300, resume=True, alphas=[0.0],
+                 scheduler="tcp://127.0.0.1:8786")
+    assert seen["scheduler"] == "tcp://127.0.0.1:8786" and seen["workers"] is None
+
+
 def _row(state, eta, n_failure=0, min_w2=0.5, held=math.nan, failed=math.nan):
     return {"state": state, "eta": eta, "reference": "equilibrium", "probed": True,
             "n_failure": n_failure, "min_w2": min_w2, "eta_target_max_held": held,
@@ -140,3 +162,41 @@ def test_a_held_reference_counts_as_a_target_held_even_unprobed():
     assert b["eta_lim_low"] == held["eta"] and b["eta_lim_high"] == 0.8942
     assert not b["eta_lim_bracket_consistent"] and "no single eta_lim" in eta_lim_text(b)
 
+
+
+def test_makespan_hands_each_run_to_the_first_free_worker():
+    from dem.domain import makespan
+    assert makespan([3, 1, 1, 1], 2) == 3          # 3 | 1 + 1 + 1
+    assert makespan([1, 1, 1, 3], 2) == 4          # 1 + 1 | 1 + 3: the order matters
+    assert makespan([2, 2, 2], 1) == 6 and makespan([2, 2, 2], 5) == 2 and makespan([], 3) == 0
+    with pytest.raises(ValueError, match="workers"):
+        makespan([1.0], 0)
+
+
+def test_stage_steps_and_the_cluster_estimate(tmp_path, capsys):
+    # a finished cross-check folder in miniature: two states, one probed (two directions)
+    import importlib.util
+    from dem.domain import stage_steps
+    d = tmp_path / "xc" / "dem" / "domain"
+    for name, first, last in (("state_f0.900", 100, 5100), ("state_f1.000", 200, 1200)):
+        (d / name).mkdir(parents=True)
+        (d / name / "reference_history.csv").write_text(
+            f"step,kinetic_energy\n{first},1e-3\n{last},1e-9\n")
+    (d / "state_f0.900" / "probes.csv").write_text(
+        "alpha_sigma,steps,steps_elastic\n0,3000,1000\n180,9000,1000\n")
+    assert stage_steps(d) == ([5000.0, 1000.0], [1000.0, 1000.0], [3000.0, 9000.0])
+    (tmp_path / "xc" / "conclusions.json").write_text(json.dumps({"timings": {
+        "FE specimen": 2.0, "DEM (2 disks)": 99.0, "  DEM compaction + biaxial test": 60.0,
+        "  DEM relaxations and probes (this run)": 15.0}}))
+    from pathlib import Path
+    script = Path(__file__).resolve().parents[2] / "bench" / "cluster_estimate.py"
+    spec = importlib.util.spec_from_file_location("cluster_estimate", script)
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    m.main([str(tmp_path / "xc"), "--workers", "1,2", "--measured-workers", "1"])
+    out = capsys.readouterr().out
+    # one worker: 6000 + 2000 + 12000 steps in 15 s -> 1333 steps/s; two: 5000 + 1000 + 9000
+    assert "1333 steps/s a worker" in out
+    two = [line for line in out.splitlines() if line.split()[:1] == ["2"]][0].split()
+    assert float(two[4]) == pytest.approx(15000 / (20000 / 15) / 60, abs=0.05)
+    assert float(two[5]) == pytest.approx(float(two[4]) + 62 / 60, abs=0.05)

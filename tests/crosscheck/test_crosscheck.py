@@ -70,6 +70,25 @@ def test_comparison_state_by_its_rule_and_every_probe_decided(xc):
     assert d["n_undecided"] == 0 and d["n_equilibrium"] + d["n_failure"] == len(ALPHAS)
 
 
+def test_dem_runs_on_a_dask_cluster_give_the_same_probes(xc, tmp_path):
+    # `crosscheck --scheduler`: the relaxations and probe runs of the DEM part go to a dask
+    # cluster (here a local one of two workers) and come back the same, to the byte
+    import shutil
+    distributed = pytest.importorskip("distributed")
+    from dem.crosscheck import DEFAULT_SMALL, dem_part
+    out, c = xc
+    shutil.copytree(out / "dem" / "biaxial", tmp_path / "dem" / "biaxial")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        d = dem_part(str(tmp_path / "dem"), n=300, rate=0.1, alphas=ALPHAS, resume=True,
+                     max_steps=DEFAULT_SMALL["max_steps"], domain=False,
+                     scheduler=cluster.scheduler_address)
+    name = c["dem"]["state"]["state"]
+    assert d["comparison"]["state"] == name
+    probes = "dem/domain/" + name + "/probes.csv"
+    assert (tmp_path / probes).read_bytes() == (out / probes).read_bytes()
+
+
 def test_instability_cone_in_third_quadrant_in_both_models(xc):
     _, c = xc
     h, d = c["hmodel"], c["dem"]

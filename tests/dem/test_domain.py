@@ -100,28 +100,6 @@ def test_domain_end_to_end_resume_and_dask(biaxial_dir, tmp_path, monkeypatch):
     assert (out2 / "domain_probes.csv").read_bytes() == first_probes
 
 
-def test_crosscheck_sends_the_dem_runs_to_the_scheduler(biaxial_dir, tmp_path, monkeypatch):
-    # the cross-check's relaxations and probes go through run_domain, whose dask path is the
-    # one checked above: here, that the cross-check hands it the scheduler (and workers=None)
-    import shutil
-    import dem.domain
-    from dem.crosscheck import dem_part
-    shutil.copytree(biaxial_dir, tmp_path / "dem" / "biaxial")
-    seen = {}
-
-    class Sent(Exception):
-        pass
-
-    def fake_run_domain(*args, **kw):
-        seen.update(kw)
-        raise Sent
-    monkeypatch.setattr(dem.domain, "run_domain", fake_run_domain)
-    with pytest.raises(Sent):
-        dem_part(str(tmp_path / "dem"), n=300, resume=True, alphas=[0.0],
-                 scheduler="tcp://127.0.0.1:8786")
-    assert seen["scheduler"] == "tcp://127.0.0.1:8786" and seen["workers"] is None
-
-
 def _row(state, eta, n_failure=0, min_w2=0.5, held=math.nan, failed=math.nan):
     return {"state": state, "eta": eta, "reference": "equilibrium", "probed": True,
             "n_failure": n_failure, "min_w2": min_w2, "eta_target_max_held": held,

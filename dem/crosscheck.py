@@ -104,8 +104,9 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     ``threads``: threads of the compaction, the biaxial test (default: auto; the results do
     not depend on it); the relaxations and probes run one thread each in ``workers``
     processes, or on the dask.distributed cluster of ``scheduler`` (its address), each run
-    one task: the results do not depend on where a run ran.  ``resume``: keep what an interrupted run in ``out_dir`` finished (the biaxial
-    test or its checkpoint, the relaxed references, the probe runs already on disk).
+    one task: the results do not depend on where a run ran.  ``resume``: keep what an
+    interrupted run in ``out_dir`` finished (the biaxial test or its checkpoint, the relaxed
+    references, the probe runs already on disk).
     ``params``: DemParams of the sample (default: the paper's set); n and seed override it.
     """
     from . import io

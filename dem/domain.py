@@ -247,10 +247,11 @@ def makespan(durations, workers: int) -> float:
 
 
 def stage_steps(domain_dir):
-    """The time steps of every run of a finished ``dem domain`` (or cross-check) folder, in
-    the order ``run_domain`` hands them out: (relaxations, elastic runs, sliding runs), lists of
-    step counts (a relaxation from its ``reference_history.csv``, a probe run from
-    ``probes.csv``; the sliding runs start once every elastic run has ended)."""
+    """The time steps of every run of a finished ``dem domain`` (or cross-check) folder:
+    (relaxations, elastic runs, sliding runs), lists of step counts (a relaxation from its
+    ``reference_history.csv``, a probe run from ``probes.csv``), the states in name order (that
+    of ``run_domain`` for the states at fractions of the peak), the waves as ``run_domain``
+    hands them out (the sliding runs start once every elastic run has ended)."""
     names = sorted(d for d in os.listdir(domain_dir) if d.startswith("state_")
                    and os.path.isdir(os.path.join(domain_dir, d)))
     relax, elastic, sliding = [], [], []

@@ -8,7 +8,8 @@ then the sliding runs, which need their elastic strain), each run to the first w
 the simulated wall time of its waves on the workers it ran with, in steps, against its measured
 wall time. The biaxial test (one sample, its own threads) and the H-model and FE parts do not
 spread and are added as measured. A worker is taken as fast as one of this run's workers, and
-dask's own overhead (seconds a task) is left out.
+dask's own overhead (seconds a task) is left out. The run must have done its relaxations and
+probes in one go: a run completed by `--resume` measured only what was left.
 
     python bench/cluster_estimate.py DIR                 # DIR: a `crosscheck` output folder
     python bench/cluster_estimate.py DIR --workers 2,8,16,45 --measured-workers 2

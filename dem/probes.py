@@ -386,6 +386,9 @@ def run_probe_sets(sets, opts: ProbeOptions = ProbeOptions(), workers=None, sche
     return [combine(list(o.values()), opts) for o in outs]
 
 
+NEEDS_DASK = "--scheduler needs dask.distributed (pip install 'granular-w2[distributed]')"
+
+
 def check_scheduler(address: str, timeout: float = 5.0) -> None:
     """Refuse, before any computation, a ``--scheduler`` address that is malformed, needs a
     missing dask.distributed, or where nothing listens (a TCP connection within ``timeout``
@@ -395,8 +398,7 @@ def check_scheduler(address: str, timeout: float = 5.0) -> None:
     try:
         from distributed.comm.addressing import parse_address, parse_host_port
     except ImportError as e:
-        raise ValueError("--scheduler needs dask.distributed (pip install "
-                         "'granular-w2[distributed]')") from e
+        raise ValueError(NEEDS_DASK) from e
     try:
         scheme, loc = parse_address(address)
         if scheme != "tcp":
@@ -424,8 +426,7 @@ def _map(tasks, collect, workers, scheduler, fn=None):
         try:
             from dask.distributed import Client, as_completed
         except ImportError as e:
-            raise RuntimeError("--scheduler needs dask.distributed (pip install "
-                               "'granular-w2[distributed]')") from e
+            raise RuntimeError(NEEDS_DASK) from e
         with Client(scheduler) as client:
             futs = client.map(fn, args, pure=False)
             where = {f.key: tag for f, tag in zip(futs, tags)}

@@ -141,7 +141,6 @@ def test_a_held_reference_counts_as_a_target_held_even_unprobed():
     assert not b["eta_lim_bracket_consistent"] and "no single eta_lim" in eta_lim_text(b)
 
 
-
 def test_makespan_hands_each_run_to_the_first_free_worker():
     from dem.domain import makespan
     assert makespan([3, 1, 1, 1], 2) == 3          # 3 | 1 + 1 + 1

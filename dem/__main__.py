@@ -378,6 +378,12 @@ def main(argv=None):
             check_scheduler(a.scheduler)
         if getattr(a, "directions", None):
             _directions(a)            # bad input before the compilation
+        if getattr(a, "state", None):
+            from . import io
+            io.load_state(a.state)    # a missing or foreign state file, before the compilation
+        if getattr(a, "biaxial", None):
+            from .domain import load_states
+            load_states(a.biaxial, [s for s in (getattr(a, "states", None) or "").split(",") if s])
         stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"
                                    if hasattr(a, "resume") else ""))
         from . import kernels

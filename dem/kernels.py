@@ -18,7 +18,9 @@ Speed (issue 11; ``bench/bench_dem.py``), with the arithmetic of every force unc
 bit: indices into the per-disk arrays are unsigned in the step loops (numba then skips its
 negative-index test: +23 % on one thread), the contact law is branch-free (+7 %), and the step
 kernels use ``error_model="numpy"`` (no zero-division test; a contact at zero distance is
-impossible with positive radii: +4 %).
+impossible with positive radii: +4 %); a block's pairs go through an L1 scratch in chunks
+(gather, vectorized contact law, sums in pair order) and the leapfrog runs on flat views, both
+vectorized (1.2-1.3x; ``_block_step``, tested against a plain one-loop step to the bit).
 """
 import math
 
@@ -27,6 +29,7 @@ from numba import njit, prange
 
 U = np.uint64   # unsigned index: numba skips the negative-index wraparound test for it
 FAST = dict(cache=True, error_model="numpy")   # the step kernels' compile options
+CHUNK = 256     # pairs per chunk of _block_step's three passes (8 rows x 256 x 8 B = 16 kB)
 
 
 
@@ -412,7 +415,7 @@ def cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, mr, kn, kt, mu, cap_on, bet
 @njit(**FAST)
 def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
                 x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref, disp2,
-                kn, kt, mu, cap_on, beta, kr, mur, damping, dt):
+                kn, kt, mu, cap_on, beta, kr, mur, damping, dt, sc):
     """One time step of the disks of block b: contact forces summed into fnet (N,4) =
     (fx, fy, sum of tangential forces -> torque, rolling moments), Cundall damping, leapfrog.
     Returns the largest squared displacement since the last rebuild in the block [m^2].
@@ -427,7 +430,8 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
     before, so blocks run concurrently.  Rolling resistance (mur > 0) is a second pass over
     the same pairs, summing the moments into column 3 in the same order; without it neither
     that pass nor that column is touched, and the force loop carries no rolling code (it
-    cost 15 % of its speed inside it).
+    cost 15 % of its speed inside it).  sc (nblocks, 8, chunk): the block's scratch rows of
+    the chunked contact law (``advance`` allocates it).
     """
     rolling = mur > 0.0
     p0 = bounds[b]
@@ -448,31 +452,57 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
             fnet[j, 2] += cf[c, 2]
             if rolling:
                 fnet[j, 3] -= cf[c, 3]
+    # The pairs the block heads, in chunks of CHUNK pairs through the rows of sc[b] (in L1):
+    # pass 0 gathers each pair's relative kinematics into contiguous rows, pass 1 runs the
+    # contact law on them (no indirect access: the compiler vectorizes it, divisions and
+    # square roots included), pass 2 adds the forces to the disks in increasing pair index.
+    # The operations of every force are the same as in one loop, so are their bits.
+    S = sc[b]
+    ch = sc.shape[2]
     c = ci_off[b]
-    for kk in range(kbounds[b], kbounds[b + 1]):
-        k = U(kk)
-        i = U(pi[k])
-        j = U(pj[k])
-        if pj[k] >= p1:
-            # cross pair: force computed before; this block adds the share of its disk i
-            if con[c]:
-                fnet[i, 0] += cf[c, 0]
-                fnet[i, 1] += cf[c, 1]
-                fnet[i, 2] += cf[c, 2]
-            c += 1
-            continue
-        meff = m[i] * m[j] / (m[i] + m[j]) if beta > 0.0 else 0.0
-        touch, fx, fy, f_t = _contact_law(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], r[i] + r[j],
-                                          v[j, 0] - v[i, 0], v[j, 1] - v[i, 1],
-                                          w[i] * r[i] + w[j] * r[j], ft[k], meff,
-                                          kn, kt, mu, cap_on, beta, dt)
-        ft[k] = f_t
-        fnet[i, 0] += fx
-        fnet[i, 1] += fy
-        fnet[i, 2] += f_t
-        fnet[j, 0] -= fx
-        fnet[j, 1] -= fy
-        fnet[j, 2] += f_t
+    for k0 in range(kbounds[b], kbounds[b + 1], ch):
+        nk = min(ch, kbounds[b + 1] - k0)
+        for q in range(nk):
+            k = U(k0 + q)
+            i = U(pi[k])
+            j = U(pj[k])
+            S[0, q] = x[j, 0] - x[i, 0]
+            S[1, q] = x[j, 1] - x[i, 1]
+            S[2, q] = r[i] + r[j]
+            S[3, q] = v[j, 0] - v[i, 0]
+            S[4, q] = v[j, 1] - v[i, 1]
+            S[5, q] = w[i] * r[i] + w[j] * r[j]
+            S[6, q] = ft[k]
+            S[7, q] = m[i] * m[j] / (m[i] + m[j]) if beta > 0.0 else 0.0
+        for q in range(nk):
+            _, fx, fy, f_t = _contact_law(S[0, q], S[1, q], S[2, q], S[3, q], S[4, q], S[5, q],
+                                          S[6, q], S[7, q], kn, kt, mu, cap_on, beta, dt)
+            S[0, q] = fx
+            S[1, q] = fy
+            S[2, q] = f_t
+        for q in range(nk):
+            k = U(k0 + q)
+            i = U(pi[k])
+            j = U(pj[k])
+            if pj[k] >= p1:
+                # cross pair: force computed before (cross_forces, which also updated its
+                # history); this block adds the share of its disk i
+                if con[c]:
+                    fnet[i, 0] += cf[c, 0]
+                    fnet[i, 1] += cf[c, 1]
+                    fnet[i, 2] += cf[c, 2]
+                c += 1
+                continue
+            fx = S[0, q]
+            fy = S[1, q]
+            f_t = S[2, q]
+            ft[k] = f_t
+            fnet[i, 0] += fx
+            fnet[i, 1] += fy
+            fnet[i, 2] += f_t
+            fnet[j, 0] -= fx
+            fnet[j, 1] -= fy
+            fnet[j, 2] += f_t
     if rolling:
         c = ci_off[b]
         for kk in range(kbounds[b], kbounds[b + 1]):
@@ -491,30 +521,44 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
             mr[k] = mk
             fnet[i, 3] += mk
             fnet[j, 3] -= mk
-    dmax = 0.0
+    # The leapfrog on flat views with the new v, w, x kept in locals: written so, the loop
+    # vectorizes (measured 7.1 -> 4.7 ns a disk; the same operations, the same bits)
+    ff = fnet.reshape(-1)
+    vf = v.reshape(-1)
+    xf = x.reshape(-1)
+    xr = x_ref.reshape(-1)
     for pp in range(p0, p1):
         p = U(pp)
-        fx = fnet[p, 0]
-        fy = fnet[p, 1]
-        tq = fnet[p, 2] * r[p]
+        p2 = p + p
+        p4 = p2 + p2
+        fx = ff[p4]
+        fy = ff[p4 + U(1)]
+        tq = ff[p4 + U(2)] * r[p]
         if rolling:
-            tq += fnet[p, 3]
-        fnet[p, 2] = tq
+            tq += ff[p4 + U(3)]
+        ff[p4 + U(2)] = tq
         if damping > 0.0:
             # Cundall non-viscous damping per component: F <- F - lambda |F| sign(v)
-            fx -= damping * abs(fx) * np.sign(v[p, 0])
-            fy -= damping * abs(fy) * np.sign(v[p, 1])
+            fx -= damping * abs(fx) * np.sign(vf[p2])
+            fy -= damping * abs(fy) * np.sign(vf[p2 + U(1)])
             tq -= damping * abs(tq) * np.sign(w[p])
-        v[p, 0] += fx / m[p] * dt
-        v[p, 1] += fy / m[p] * dt
-        w[p] += tq / inertia[p] * dt
-        x[p, 0] += v[p, 0] * dt
-        x[p, 1] += v[p, 1] * dt
-        theta[p] += w[p] * dt
-        ddx = x[p, 0] - x_ref[p, 0]
-        ddy = x[p, 1] - x_ref[p, 1]
-        dd = ddx * ddx + ddy * ddy
-        disp2[p] = dd
+        v0 = vf[p2] + fx / m[p] * dt
+        v1 = vf[p2 + U(1)] + fy / m[p] * dt
+        wp = w[p] + tq / inertia[p] * dt
+        vf[p2] = v0
+        vf[p2 + U(1)] = v1
+        w[p] = wp
+        x0 = xf[p2] + v0 * dt
+        x1 = xf[p2 + U(1)] + v1 * dt
+        xf[p2] = x0
+        xf[p2 + U(1)] = x1
+        theta[p] += wp * dt
+        ddx = x0 - xr[p2]
+        ddy = x1 - xr[p2 + U(1)]
+        disp2[p] = ddx * ddx + ddy * ddy
+    dmax = 0.0
+    for pp in range(p0, p1):
+        dd = disp2[U(pp)]
         if dd > dmax:
             dmax = dd
     return dmax
@@ -523,12 +567,12 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
 @njit(cache=True, parallel=True, error_model="numpy")
 def blocks_step(bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
                 x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref, disp2,
-                kn, kt, mu, cap_on, beta, kr, mur, damping, dt, dmax):
+                kn, kt, mu, cap_on, beta, kr, mur, damping, dt, dmax, sc):
     """``_block_step`` of every block, blocks spread over threads; dmax (nblocks,)."""
     for b in prange(bounds.shape[0] - 1):
         dmax[b] = _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
                               x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref,
-                              disp2, kn, kt, mu, cap_on, beta, kr, mur, damping, dt)
+                              disp2, kn, kt, mu, cap_on, beta, kr, mur, damping, dt, sc)
 
 
 # --------------------------------------------------------------------------------------
@@ -555,19 +599,20 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
     cf = np.empty((cross_k.shape[0], 4))
     con = np.empty(cross_k.shape[0], np.bool_)
     dmax = np.zeros(nblocks)
+    sc = np.empty((nblocks, 8, CHUNK))    # pair scratch of each block (_block_step)
     done = 0
     for s in range(nsteps):
         wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK)
         if nblocks == 1:
             dmax[0] = _block_step(0, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
                                   x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet,
-                                  x_ref, disp2, kn, kt, mu, cap_on, beta, kr, mur, damping, dt)
+                                  x_ref, disp2, kn, kt, mu, cap_on, beta, kr, mur, damping, dt, sc)
         else:
             cross_forces(cross_k, x, v, w, r, m, pi, pj, ft, mr, kn, kt, mu, cap_on, beta, kr,
                          mur, dt, cf, con)
             blocks_step(bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
                         x, v, w, theta, r, m, inertia, pi, pj, ft, mr, fext, fnet, x_ref, disp2,
-                        kn, kt, mu, cap_on, beta, kr, mur, damping, dt, dmax)
+                        kn, kt, mu, cap_on, beta, kr, mur, damping, dt, dmax, sc)
         gstep = step0 + s
         if ramp_len > 0:
             rt = (gstep - ramp_start + 1) / ramp_len

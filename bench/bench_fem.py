@@ -13,7 +13,9 @@ the FE's constitutive rate at least 0.8 x the batch baseline. Every indicator at
 OpenBLAS runs on one thread here (OPENBLAS_NUM_THREADS=1, set before numpy is imported): SuperLU and
 ARPACK on ~10^3 dofs are too small for BLAS threads, which on a shared 2-core machine fight the
 material kernel's threads for the cores (the global check also sets it itself, fem.indicators).
-The machine's load average is printed before and after the run. Kernels missing from Numba's
+The global check runs in a process of its own (fem.indicators.GlobalCheckProcess) and Numba's
+OpenMP threads sleep when idle (OMP_WAIT_POLICY=passive, set by fem.__main__ when imported here,
+before any kernel runs). The machine's load average is printed before and after the run. Kernels missing from Numba's
 cache are compiled before the timed run (as the CLI does), so that a first run after an edit does
 not count their compilation.
 """

@@ -12,11 +12,12 @@ import time
 from dataclasses import dataclass, asdict, field
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from hmodel import HParams
 from .adapter import stress_to_model, strain_to_model
-from .indicators import GlobalCheck, global_w2, local_indicators
+from .indicators import GlobalCheck, GlobalCheckProcess, global_w2, local_indicators
 from .mesh import _count, rectangle, from_file
 from hmodel.io import atomic_write_bytes
 
@@ -68,6 +69,7 @@ class BiaxialConfig:
     fields: bool = True
     n_sphere: int = 600
     mp_reference: bool = True
+    global_process: bool = True
 
     def params(self) -> HParams:
         return HParams(kn=self.kn, kt=self.kt, phi_g=self.phi_g, alpha0=self.alpha0, r_g=self.r_g,
@@ -106,24 +108,25 @@ def _cells(prob):
 
 
 def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphere, t_start,
-                 check: GlobalCheck, times: dict):
-    """One CSV row, the field data of a converged state and its bifurcation modes (full dof
-    vectors or None, see GlobalCheck); adds the seconds spent to times["global"], ["local"]."""
+                 check, times: dict):
+    """One CSV row and the field data of a converged state, but for the global indicators:
+    its stiffness is submitted to ``check`` (GlobalCheck or GlobalCheckProcess) and
+    ``_finish_record`` adds them; adds the seconds spent to times["global"], ["local"]."""
     mat = prob.material
     s_m = stress_to_model(trial.sigma)                       # (2, 2, P) compression +
     s1 = -prob.platen_force(f_int) / prob.width
     s2 = float(prob.volume_average(s_m[1, 1]))
     q, p = s1 - s2, 0.5 * (s1 + s2)
     t0 = time.perf_counter()
-    K = prob.stiffness(trial.D)
-    g, modes = check(K)
+    check.submit(prob.stiffness(trial.D))
     t1 = time.perf_counter()
     times["global"] += t1 - t0
     df_int = info["df_int"]
     df_ext = np.zeros_like(df_int)        # reactions on prescribed dofs; f_lat is a dead load
     df_ext[prob.prescribed] = df_int[prob.prescribed]
     w2 = global_w2(info["du"], df_int, df_ext)
-    loc = local_indicators(trial.D, n_sphere=n_sphere)
+    loc = local_indicators(trial.D, n_sphere=n_sphere,
+                           one_thread=isinstance(check, GlobalCheckProcess))
     times["local"] += time.perf_counter() - t1
     eps_fe = prob.strain(stepper.u)
     row = dict(step=stepper.step, eps1=stepper.eps1, s1=s1, s2=s2, q=q, p=p, eta=q / p,
@@ -137,10 +140,11 @@ def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphe
                sliding_fraction=float(prob.volume_average(trial.sliding)),
                open_fraction=float(prob.volume_average(trial.opened)),
                eps2_mean=float(prob.volume_average(strain_to_model(eps_fe)[1, 1])),
-               time_s=time.perf_counter() - t_start, **g, **w2)
-    # fields: displacement and modes at nodes; element means of stress / strain (tensors, FE
-    # convention: tension positive, named so), element minima of the indicators
-    point = {"displacement": nodal_vector(prob, stepper.u), **mode_fields(prob, modes)}
+               time_s=time.perf_counter() - t_start)
+    # fields: displacement (and the modes, _finish_record) at nodes; element means of stress /
+    # strain (tensors, FE convention: tension positive, named so), element minima of the
+    # indicators
+    point = {"displacement": nodal_vector(prob, stepper.u)}
     cell = {"stress_tension_positive": cell_tensor(prob, trial.sigma),
             "strain_tension_positive": cell_tensor(prob, eps_fe),
             "q": prob.per_element(s_m[0, 0] - s_m[1, 1]),
@@ -152,8 +156,21 @@ def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphe
     weak = np.zeros(prob.nel)
     weak[prob.weak_elements] = 1.0
     cell["weak"] = weak
-    return (row, point, {k: [np.ascontiguousarray(v, dtype=float)] for k, v in cell.items()},
-            modes)
+    return (row, w2, point,
+            {k: [np.ascontiguousarray(v, dtype=float)] for k, v in cell.items()})
+
+
+def _finish_record(prob: Biaxial, check, row: dict, w2: dict, point: dict, times: dict) -> dict:
+    """Take the global indicators of the step ``_step_record`` submitted: into ``row`` (after
+    its other columns, then the global W2) and ``point`` (the mode fields); returns the modes
+    (full dof vectors or None, see GlobalCheck)."""
+    t0 = time.perf_counter()
+    g, modes = check.result()
+    times["global"] += time.perf_counter() - t0
+    row.update(g)
+    row.update(w2)
+    point.update(mode_fields(prob, modes))
+    return modes
 
 
 EVENT_LABELS = {
@@ -221,7 +238,11 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
     writer = fields = logf = None
     rows = []
     t_ind = {"indicators_output": 0.0, "global": 0.0, "local": 0.0}
-    check = GlobalCheck(prob)
+    # the global check in a process of its own where Numba has more than one thread (then
+    # there is a core for it; see GlobalCheckProcess); the same rows either way
+    check = (GlobalCheckProcess.start(prob)
+             if cfg.global_process and numba.config.NUMBA_NUM_THREADS > 1 else None) \
+        or GlobalCheck(prob)
     first_mode = []     # mode_ks[_f].png drawn once each, at the first lam_min(K_s[_f]) <= 0
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -241,11 +262,8 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
 
     stepper.log = log
 
-    def emit(trial, f_int, info):
-        t0 = time.perf_counter()
-        row, pdata, cdata, modes = _step_record(prob, stepper, trial, f_int, info, cfg.n_sphere,
-                                                t_start, check, t_ind)
-        rows.append(row)
+    def write(row, pdata, cdata, modes) -> str:
+        """Write a complete row (CSV, fields, the first mode figures); returns its progress line."""
         if writer is not None:
             writer.write(row)
         if fields is not None:
@@ -257,14 +275,38 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
                           title=(rf"eigenvector of $\lambda_{{min}}(K_s)$ = "
                                  f"{row['lam_min_ks' + suf]:.4g} Pa, platen {control}, step "
                                  rf"{row['step']}, $\varepsilon_1$ = {100 * row['eps1']:.3f} %"))
+        return (f"step {row['step']:4d} eps1 = {100 * row['eps1']:7.4f} % q = {row['q'] / 1e3:9.3f} kPa "
+                f"eta = {row['eta']:.4f} it = {row['newton_iters']} cut = {row['cutbacks']} "
+                f"detK = {row['det_k_sign']:+d}/{row['det_k_sign_f']:+d} "
+                f"lam(Ks) = {row['lam_min_ks']:.3e}/{row['lam_min_ks_f']:.3e} "
+                f"W2 = {row['w2_global']:+.3f} slide = {row['sliding_fraction']:.3f} "
+                f"t = {row['time_s']:.1f} s")
+
+    pending = []        # the last complete row, written while the next step is checked
+
+    def flush(announce: bool):
+        """Write the pending row (at the end of the run, whatever ends it: complete, its global
+        check done); its progress line with ``announce``."""
+        if pending:
+            t0 = time.perf_counter()
+            line = write(*pending.pop())
+            t_ind["indicators_output"] += time.perf_counter() - t0
+            if announce and progress is not None:
+                progress(line)
+
+    def emit(trial, f_int, info):
+        # the global check of this step runs (in the check's process, if any) while this one
+        # does the local indicators and writes the previous row
+        t0 = time.perf_counter()
+        row, w2, pdata, cdata = _step_record(prob, stepper, trial, f_int, info, cfg.n_sphere,
+                                             t_start, check, t_ind)
+        line = write(*pending.pop()) if pending else None
+        modes = _finish_record(prob, check, row, w2, pdata, t_ind)
+        rows.append(row)
+        pending.append((row, pdata, cdata, modes))
         t_ind["indicators_output"] += time.perf_counter() - t0
-        if progress is not None:
-            progress(f"step {row['step']:4d} eps1 = {100 * row['eps1']:7.4f} % q = {row['q'] / 1e3:9.3f} kPa "
-                     f"eta = {row['eta']:.4f} it = {row['newton_iters']} cut = {row['cutbacks']} "
-                     f"detK = {row['det_k_sign']:+d}/{row['det_k_sign_f']:+d} "
-                     f"lam(Ks) = {row['lam_min_ks']:.3e}/{row['lam_min_ks_f']:.3e} "
-                     f"W2 = {row['w2_global']:+.3f} slide = {row['sliding_fraction']:.3f} "
-                     f"t = {row['time_s']:.1f} s")
+        if line is not None and progress is not None:
+            progress(line)
 
     steps = []
 
@@ -279,6 +321,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
         emit(res.trial, res.f_int, info)
 
     error = None
+    ended = False       # the steps ended (done, or a step failed), not an interrupt
     try:
         # row 0: the isotropic initial state, tangent of a zero increment
         trial0 = prob.material.trial(np.zeros((2, 2, prob.npts)))
@@ -289,7 +332,12 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
         except RuntimeError as e:
             error = e
             log(f"FAILED: {e}")
+        ended = True
     finally:        # whatever ends the run (also Ctrl-C, SIGTERM): the writers close, complete
+        try:
+            flush(announce=ended)     # interrupted: the row is written, no progress line
+        finally:
+            check.close()
         if writer is not None:
             writer.close()
         if fields is not None:

@@ -44,6 +44,7 @@ import scipy.sparse.linalg as spla
 from .problem import PatternGather
 
 __all__ = ["permutation_parity", "det_sign", "symmetric_inertia", "lam_min_sym", "GlobalCheck",
+           "GlobalCheckProcess",
            "global_indicators", "global_indicators_direct", "global_w2", "mandel",
            "local_indicators", "fibonacci_sphere"]
 
@@ -436,6 +437,19 @@ class GlobalCheck:
         with one_blas_thread():
             return self._check(K, want_modes)
 
+    def submit(self, K, want_modes: bool = True) -> None:
+        """Start the check of K; ``result()`` gives it (here it runs in ``result``; the same
+        protocol as ``GlobalCheckProcess``, which runs it in another process meanwhile)."""
+        self._job = (K, want_modes)
+
+    def result(self) -> tuple[dict, dict]:
+        K, want_modes = self._job
+        self._job = None
+        return self(K, want_modes)
+
+    def close(self) -> None:
+        pass
+
     def _check(self, K, want_modes):
         K = sp.csr_matrix(K)
         free = self.free
@@ -707,6 +721,122 @@ class GlobalCheck:
         return self._full(suffix, V[:, 0])
 
 
+class GlobalCheckProcess:
+    """``GlobalCheck`` of ``problem`` in a child process, for a run on more than one core: the
+    run ``submit``s the stiffness of a converged step and does its local indicators and the
+    previous step's output while the child checks it, then takes the ``result``. The child
+    checks the steps one after another in their order with one GlobalCheck, so every row and
+    mode is the same to the bit as in process.
+
+    The child is forked at the first ``submit``: it shares the problem, the compiled kernels
+    and that stiffness's sparsity pattern, and K.data goes through a shared buffer (the
+    pattern is the same at every step of a run: only a one-byte message goes through the
+    pipe; a new pattern goes whole). It runs no parallel kernel, so it needs none of the
+    parent's threads. ``start`` returns None where fork is not available. The child ignores
+    SIGINT and SIGTERM (Ctrl-C reaches the whole process group: the parent decides) and ends
+    when the parent closes the pipe, or dies (the kernel closes it then)."""
+
+    def __init__(self, problem, seed: int):
+        self._problem, self._seed = problem, seed
+        self._conn = self._proc = None
+        self._pattern = self._buf = None
+
+    @classmethod
+    def start(cls, problem, seed: int = 0):
+        import multiprocessing
+        if "fork" not in multiprocessing.get_all_start_methods():
+            return None
+        return cls(problem, seed)
+
+    def _fork(self, K):
+        import mmap
+        import multiprocessing
+        import sys
+        import warnings
+        ctx = multiprocessing.get_context("fork")
+        self._pattern = (K.indptr.copy(), K.indices.copy(), K.shape)
+        self._buf = np.frombuffer(mmap.mmap(-1, max(K.data.nbytes, 8)), dtype=float)[:K.nnz]
+        sys.stdout.flush()      # else the child would write the parent's buffered lines again
+        sys.stderr.flush()
+        parent, child = ctx.Pipe()
+        proc = ctx.Process(target=_check_server,
+                           args=(child, parent, self._problem, self._seed, self._pattern,
+                                 self._buf), daemon=True, name="fem-global-check")
+        with warnings.catch_warnings():
+            # Python >= 3.12 warns about fork in a process with threads (Numba's pool): the
+            # child runs only single-threaded code and takes no lock those threads hold
+            warnings.simplefilter("ignore", DeprecationWarning)
+            proc.start()
+        child.close()
+        self._conn, self._proc = parent, proc
+
+    def submit(self, K, want_modes: bool = True) -> None:
+        """Start the check of K (the previous one must have been taken by ``result``)."""
+        K = sp.csr_matrix(K)
+        if self._proc is None:
+            self._fork(K)
+        indptr, indices, shape = self._pattern
+        if K.shape == shape and np.array_equal(K.indptr, indptr) \
+                and np.array_equal(K.indices, indices):
+            self._buf[:] = K.data
+            self._conn.send_bytes(b"M" if want_modes else b"m")
+        else:
+            self._conn.send((K.indptr, K.indices, K.data, K.shape, want_modes))
+
+    def result(self) -> tuple[dict, dict]:
+        try:
+            kind, value = self._conn.recv()
+        except EOFError:
+            raise RuntimeError(f"the global check's process ended (exit code "
+                               f"{self._proc.exitcode})") from None
+        if kind == "error":
+            raise value
+        return value
+
+    def close(self) -> None:
+        if self._proc is None:
+            return
+        try:
+            self._conn.close()
+        finally:
+            self._proc.join(timeout=5)
+            if self._proc.is_alive():
+                self._proc.kill()
+                self._proc.join()
+            self._proc = None
+
+
+def _check_server(conn, parent_end, problem, seed, pattern, buf):
+    """The child of GlobalCheckProcess: one GlobalCheck, a step at a time, until the parent
+    closes the pipe. A one-byte message: K has ``pattern`` and its data in ``buf`` (shared)."""
+    import pickle
+    import signal
+    parent_end.close()      # the fork copied it: held open here, it would hide the parent's EOF
+    for sig in (signal.SIGINT, signal.SIGTERM):     # the parent's to handle; it closes the pipe
+        signal.signal(sig, signal.SIG_IGN)
+    check = GlobalCheck(problem, seed=seed)
+    indptr, indices, shape = pattern
+    while True:
+        try:
+            msg = conn.recv_bytes()
+        except (EOFError, OSError):
+            return
+        if len(msg) == 1:
+            K = sp.csr_matrix((buf.copy(), indices, indptr), shape=shape)
+            want_modes = msg == b"M"
+        else:
+            indptr_k, indices_k, data, shape_k, want_modes = pickle.loads(msg)
+            K = sp.csr_matrix((data, indices_k, indptr_k), shape=shape_k)
+        try:
+            out = ("ok", check(K, want_modes))
+        except Exception as e:          # to the parent, which raises it
+            out = ("error", e)
+        try:
+            conn.send(out)
+        except (BrokenPipeError, OSError):    # the parent stopped waiting (its run ended)
+            return
+
+
 def global_indicators(K, problem) -> dict:
     """The indicators of one stiffness K (ndofs, ndofs) of ``problem``, without the step history
     (see ``GlobalCheck``): det_k_sign[_f], log10_abs_det_k[_f], lam_min_ks[_f], n_neg_ks[_f]."""
@@ -882,8 +1012,11 @@ def _rice_kernel(Dq, c, s):
     return vals, idx
 
 
-def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180) -> dict:
+def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180,
+                     one_thread: bool = False) -> dict:
     """Local indicators of tangents D (2, 2, 2, 2, npts) [Pa]; every output has shape (npts,).
+    The kernels run on the faster of 1 and all Numba threads (measured as they go), or on one
+    with ``one_thread`` (another process has the other core: a biaxial run's global check).
 
     det_D [Pa^3], det_Ds [Pa^3], lam_min_Ds [Pa], w2_min [-] (min normalized W2 over strain
     directions), rice_min [Pa^2] (min over n of det of the acoustic tensor), rice_angle [deg]
@@ -900,7 +1033,7 @@ def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180) ->
     Dq = np.ascontiguousarray(np.moveaxis(D, -1, 0)).reshape(npts, 16)     # (P, ijkl)
     Mc = np.ascontiguousarray(M)
     n_max = numba.get_num_threads()
-    n = _LOCAL_THREADS.pick(n_max)
+    n = 1 if one_thread else _LOCAL_THREADS.pick(n_max)
     t0 = time.perf_counter()
     numba.set_num_threads(n)
     try:

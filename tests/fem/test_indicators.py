@@ -228,8 +228,10 @@ def test_new_route_equals_direct_route_through_the_peak(monkeypatch):
         return g
 
     monkeypatch.setattr(fb, "GlobalCheck", make)
+    # the check in this process, where the recording is (the run's own process gives the same
+    # rows: test_global_process.py)
     cfg = fb.BiaxialConfig(nx=6, ny=12, n_dir=36, d_eps1=5e-4, eps1_max=0.03, imperfection="band",
-                           imp_phi_g=15.0, fields=False, mp_reference=False)
+                           imp_phi_g=15.0, fields=False, mp_reference=False, global_process=False)
     r = fb.run_biaxial(cfg)
     c = r.curve
     assert 0 < int(np.argmax(c["q"])) < len(c["q"]) - 1                # through the peak

@@ -151,7 +151,9 @@ os.kill(os.getpid(), signal.SIGKILL)
 def test_interrupted_run_lists_every_converged_step(tmp_path, monkeypatch, rows):
     """Ctrl-C (KeyboardInterrupt) after row 0 or in the middle of a run whose XML would not be
     rewritten before the end: run_biaxial's ``finally`` closes the writer, so fields.xdmf lists
-    every row of curve.csv, readable."""
+    every row of curve.csv, readable. A row is written while the next step is checked, and its
+    progress line comes after that: the interrupt at the line of row k finds row k + 1 complete
+    (its global check returned), and it is written too."""
     from fem.biaxial import BiaxialConfig, run_biaxial
     from fem.output import FieldWriter
     monkeypatch.setattr(FieldWriter, "XML_EVERY", 1e9)
@@ -168,5 +170,6 @@ def test_interrupted_run_lists_every_converged_step(tmp_path, monkeypatch, rows)
         run_biaxial(cfg, tmp_path, progress=progress)
     c = read_curve(tmp_path / "curve.csv")
     st = _steps(tmp_path / "fields.xdmf")
-    assert len(c["step"]) == rows and len(st) == rows
+    assert len(c["step"]) == rows + 1 and len(st) == rows + 1
+    assert np.array_equal(c["step"], np.arange(rows + 1))
     assert np.array_equal([t for t, _, _ in st], c["eps1"])

@@ -832,7 +832,10 @@ def _check_server(conn, parent_end, problem, seed, pattern, buf):
         except Exception as e:          # to the parent, which raises it
             out = ("error", e)
         try:
-            conn.send(out)
+            try:
+                conn.send(out)
+            except (pickle.PicklingError, TypeError, AttributeError):    # an unpicklable error
+                conn.send(("error", RuntimeError(f"in the global check's process: {out[1]!r}")))
         except (BrokenPipeError, OSError):    # the parent stopped waiting (its run ended)
             return
 

@@ -6,10 +6,10 @@ and the leapfrog on flat views, so that the compiler vectorizes them (``dem.kern
 time in increasing pair index, each force added to both disks as it is computed, then the
 Cundall damping and the leapfrog disk by disk, in Python floats (IEEE doubles, the same
 operations in the same order). Walls and servo are the kernel's own functions (unchanged), so the
-comparison is on the pair forces and the integration. Conditions: a friction low enough that
-many contacts slide at the Coulomb cap, Cundall damping on, the normal dashpot off and on, the
-elastic probes' uncapped law, one block (two chunks of pairs: the 200-disk sample has about 480
-pairs) and three blocks (cross pairs).
+comparison is on the pair forces, the rolling moments and the integration. Conditions: a
+friction low enough that many contacts slide at the Coulomb cap, Cundall damping on, the normal
+dashpot off and on, the elastic probes' uncapped law, rolling resistance off and on, one block
+(two chunks of pairs: the 200-disk sample has about 480 pairs) and three blocks (cross pairs).
 """
 import math
 
@@ -43,18 +43,43 @@ def _law(dx, dy, rs, dvx, dvy, wr, ft_old, meff, kn, kt, mu, cap_on, beta, dt):
     return -fn * nx + f_t * tx, -fn * ny + f_t * ty, f_t, capped
 
 
+def _rolling(dx, dy, rs, dvx, dvy, meff, kn, beta, dw, mr_old, ri, rj, kr, mur, cap_on, dt):
+    d = math.sqrt(dx * dx + dy * dy)
+    touch = dx * dx + dy * dy < rs * rs
+    fn = kn * (rs - d)
+    if beta > 0.0:
+        fn -= 2.0 * beta * math.sqrt(kn * meff) * (dvx * (dx / d) + dvy * (dy / d))
+        fn = max(fn, 0.0)
+    rstar = ri * rj / (ri + rj)
+    m = mr_old - kr * rstar * rstar * dw * dt
+    if cap_on:
+        lim = mur * rstar * fn
+        m = min(max(m, -lim), lim)
+    return m if touch else 0.0
+
+
 def _sign(a):
     return 1.0 if a > 0 else (-1.0 if a < 0 else 0.0)
 
 
-def _reference_step(s, ft, fext, kn, kt, mu, cap_on, beta, damping, dt):
+def _reference_step(s, ft, mr, fext, kn, kt, mu, cap_on, beta, kr, mur, damping, dt):
     """One step of the disks of ``s`` (a Simulation's arrays, modified in place) after the wall
-    forces fext: pairs in increasing index, then the leapfrog. Returns the number of contacts
-    whose tangential force was capped by Coulomb's law."""
+    forces fext: pairs in increasing index (then, with rolling resistance, their rolling
+    moments, in the same order), then the leapfrog. Returns the number of contacts whose
+    tangential force was capped by Coulomb's law."""
     x, v, w, r, m, inertia, theta = s.x, s.v, s.w, s.r, s.m, s.inertia, s.theta
     pi, pj = s.pairs.pi, s.pairs.pj
-    fnet = np.zeros((s.n, 3))
+    fnet = np.zeros((s.n, 4))
     fnet[:, :2] = fext
+    if mur > 0.0:           # positions and velocities of the step's start
+        for k in range(pi.size):
+            i, j = int(pi[k]), int(pj[k])
+            meff = m[i] * m[j] / (m[i] + m[j]) if beta > 0.0 else 0.0
+            mr[k] = _rolling(x[j, 0] - x[i, 0], x[j, 1] - x[i, 1], r[i] + r[j],
+                             v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], meff, kn, beta, w[i] - w[j],
+                             mr[k], r[i], r[j], kr, mur, cap_on, dt)
+            fnet[i, 3] += mr[k]
+            fnet[j, 3] -= mr[k]
     n_capped = 0
     for k in range(pi.size):
         i, j = int(pi[k]), int(pj[k])
@@ -72,6 +97,8 @@ def _reference_step(s, ft, fext, kn, kt, mu, cap_on, beta, damping, dt):
         fnet[j, 2] += f_t
     for p in range(s.n):
         fx, fy, tq = fnet[p, 0], fnet[p, 1], fnet[p, 2] * r[p]
+        if mur > 0.0:
+            tq += fnet[p, 3]
         if damping > 0.0:
             fx -= damping * abs(fx) * _sign(v[p, 0])
             fy -= damping * abs(fy) * _sign(v[p, 1])
@@ -85,7 +112,8 @@ def _reference_step(s, ft, fext, kn, kt, mu, cap_on, beta, damping, dt):
     return n_capped
 
 
-def _kernel_steps(s, nsteps, kn, kt, mu, cap_on, beta, damping, nblocks, ref, ref_ft):
+def _kernel_steps(s, nsteps, kn, kt, mu, cap_on, beta, kr, mur, damping, nblocks, ref, ref_ft,
+                  ref_mr):
     """``nsteps`` single-step calls of kernels.advance on ``s`` (strain-rate control of both
     axes: the servo moves the walls at a fixed rate) and the same steps of the reference
     ``ref``, compared after every step. Returns the capped contacts of each step."""
@@ -104,28 +132,31 @@ def _kernel_steps(s, nsteps, kn, kt, mu, cap_on, beta, damping, nblocks, ref, re
         kernels.advance(1, s.x, s.v, s.w, s.theta, s.r, s.m, s.inertia, pl.pi, pl.pj, pl.ft,
                         pl.mr, pl.cand_off, pl.cand, s.fext, s.fnet, s.x_ref, s.walls_ref,
                         s.disp2, s.walls, s.prev, s.wF, s.wK, mode, zero2, zero2, 0, 0, rate,
-                        len0, step, kn, kt, mu, cap_on, beta, 0.0, 0.0, damping, s.dt,
+                        len0, step, kn, kt, mu, cap_on, beta, kr, mur, damping, s.dt,
                         p.thickness, p.servo_gain, p.servo_smoothing, p.servo_vmax,
                         0.5 * p.skin, nblocks)
-        capped.append(_reference_step(ref, ref_ft, fext, kn, kt, mu, cap_on, beta, damping,
-                                      s.dt))
+        capped.append(_reference_step(ref, ref_ft, ref_mr, fext, kn, kt, mu, cap_on, beta, kr,
+                                      mur, damping, s.dt))
         ref.walls[:] = s.walls        # the servo moved them by a prescribed rate
         for a, b in ((s.x, ref.x), (s.v, ref.v), (s.w, ref.w), (s.theta, ref.theta),
-                     (pl.ft, ref_ft)):
+                     (pl.ft, ref_ft), (pl.mr, ref_mr)):
             assert np.array_equal(a, b), f"step {step}: the kernel left the reference"
     return capped
 
 
+@pytest.mark.parametrize("mur", [0.0, 0.1])
 @pytest.mark.parametrize("beta", [0.0, 0.3])
 @pytest.mark.parametrize("nblocks", [1, 3])
 @pytest.mark.parametrize("cap_on", [True, False])
-def test_kernel_step_is_the_one_loop_step_to_the_bit(small_sample, beta, nblocks, cap_on):
+def test_kernel_step_is_the_one_loop_step_to_the_bit(small_sample, beta, nblocks, cap_on, mur):
     s = Simulation(small_sample)
     ref = Simulation(small_sample)
     p = s.params
     mu = 0.05               # low friction: many contacts reach the Coulomb cap
     kn, kt, damping = p.kn, p.kt, 0.15
+    kr = 1.0 * kt           # rolling stiffness factor 1 (DemParams' default) x kt [N/m]
     ref_ft = ref.pairs.ft.copy()
+    ref_mr = ref.pairs.mr.copy()
     assert s.pairs.pi.size > kernels.CHUNK, "the sample must give more than one chunk of pairs"
     # disks set moving and spinning: contacts load, slide and open
     dv = np.random.default_rng(0).normal(0.0, 1e-3, s.v.shape)      # [m/s]
@@ -133,10 +164,15 @@ def test_kernel_step_is_the_one_loop_step_to_the_bit(small_sample, beta, nblocks
     for a in (s, ref):
         a.v += dv
         a.w += dw
-    capped = _kernel_steps(s, 40, kn, kt, mu, cap_on, beta, damping, nblocks, ref, ref_ft)
+    capped = _kernel_steps(s, 40, kn, kt, mu, cap_on, beta, kr, mur, damping, nblocks, ref,
+                           ref_ft, ref_mr)
     touching = np.count_nonzero(ref_ft)
     assert touching > s.n       # a dense sample: more contacts than disks
     if cap_on:                  # the Coulomb cap acts on a good share of them by the end
         assert capped[-1] > 0.1 * touching, capped
     else:
         assert max(capped) == 0
+    if mur > 0.0:               # rolling moments carried by the contacts (spun disks)
+        assert np.count_nonzero(ref_mr) > 0.5 * touching
+    else:
+        assert not np.any(ref_mr)

@@ -15,9 +15,9 @@ ARPACK on ~10^3 dofs are too small for BLAS threads, which on a shared 2-core ma
 material kernel's threads for the cores (the global check also sets it itself, fem.indicators).
 The global check runs in a process of its own (fem.indicators.GlobalCheckProcess) and Numba's
 OpenMP threads sleep when idle (OMP_WAIT_POLICY=passive, set by fem.__main__ when imported here,
-before any kernel runs). The machine's load average is printed before and after the run. Kernels missing from Numba's
-cache are compiled before the timed run (as the CLI does), so that a first run after an edit does
-not count their compilation.
+before any kernel runs). The machine's load average is printed before and after the run.
+Kernels missing from Numba's cache are compiled before the timed run (as the CLI does), so that a
+first run after an edit does not count their compilation.
 """
 from __future__ import annotations
 

@@ -6,21 +6,21 @@ import argparse
 import os
 import sys
 
+import numpy as np
+
+from hmodel import options as opt
+from hmodel.experiment import compile_kernels
+from hmodel.params import ParamError
+
+from .biaxial import BiaxialConfig, run_biaxial, format_summary
+
 # Numba's OpenMP threads spin-wait after each parallel region of the material update (libgomp's
 # default, ~5 ms with this CPU's slow `pause`), on the core where the run's global check then
 # runs in its own process (fem.indicators.GlobalCheckProcess): measured, its checks took 13-16
 # ms instead of 7-10 and the run 13.3 s instead of 10.8 (20 x 40 quads). Passive: idle threads
-# sleep at once (the update itself measured no slower). libgomp reads this at its start, before
-# any kernel runs; a value set by the user is kept.
+# sleep at once (the update itself measured no slower). libgomp reads this when the first
+# parallel region starts, after these imports (they run none); a value set by the user is kept.
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
-
-import numpy as np  # noqa: E402
-
-from hmodel import options as opt  # noqa: E402
-from hmodel.experiment import compile_kernels  # noqa: E402
-from hmodel.params import ParamError  # noqa: E402
-
-from .biaxial import BiaxialConfig, run_biaxial, format_summary  # noqa: E402
 
 # memory of one quadrature point per hexagon orientation [bytes]: committed and trial states and
 # the update's outputs (10 floats + 2 flags each, about 4 copies alive during a Newton iteration)

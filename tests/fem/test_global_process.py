@@ -108,3 +108,33 @@ def test_an_interrupt_with_a_check_in_flight_leaves_the_rows_and_no_child(tmp_pa
     assert len(_fields(tmp_path / "fields.xdmf")) == rows
     assert not [p for p in multiprocessing.active_children() if p.name == "fem-global-check"]
     assert capfd.readouterr().err == ""
+
+
+def test_a_new_sparsity_pattern_goes_whole_and_gives_the_in_process_rows():
+    """The shared buffer holds K.data of the first stiffness's pattern; a stiffness of another
+    pattern (here the same matrix with explicit zeros stored) goes through the pipe whole. The
+    rows are those of one GlobalCheck in process fed the same sequence."""
+    from fem.biaxial import build_problem
+    prob = build_problem(BiaxialConfig(nx=2, ny=4, n_dir=16))
+    D = prob.material.trial(np.zeros((2, 2, prob.npts))).D
+    K = prob.stiffness(D).tocsr()
+    K2 = K.tolil()
+    K2[0, prob.ndofs - 1] = 1.0           # an entry outside the pattern, then its value zeroed:
+    K2 = K2.tocsr()                       # stored, so the pattern differs, the matrix does not
+    K2.data[(K2.indices == prob.ndofs - 1) & (np.repeat(np.arange(prob.ndofs),
+                                                         np.diff(K2.indptr)) == 0)] = 0.0
+    assert K2.nnz == K.nnz + 1 and (K2 - K).count_nonzero() == 0
+    here = GlobalCheck(prob)
+    child = GlobalCheckProcess.start(prob)
+    try:
+        for M in (K, K2, 1.5 * K, K2):
+            child.submit(M)
+            got, modes = child.result()
+            want, want_modes = here(M)
+            assert got == want
+            assert modes.keys() == want_modes.keys()
+            for k in modes:
+                assert (modes[k] is None and want_modes[k] is None) \
+                    or np.array_equal(modes[k], want_modes[k])
+    finally:
+        child.close()

@@ -614,19 +614,75 @@ def allocate_outputs(npts, ndir):
             np.empty(npts), np.empty(npts), np.empty(npts))
 
 
+@njit(cache=True, inline="always")
+def _to_strain(ep, Ainv, de):
+    """de (1, 3) = A^-1 e' of the controlled variables e' (1, 3) (a general mixed control)."""
+    for i in range(3):
+        acc = 0.0
+        for j in range(3):
+            acc += Ainv[i, j] * ep[0, j]
+        de[0, i] = acc
+
+
+@njit(cache=True, inline="always")
+def _to_controlled(de, A, ep):
+    """ep (3,) = A de of a strain increment de (3,): its controlled variables."""
+    for i in range(3):
+        acc = 0.0
+        for j in range(3):
+            acc += A[i, j] * de[j]
+        ep[i] = acc
+
+
+@njit(cache=True, inline="always")
+def _conjugate(sig, Ainv, general, sv):
+    """sv (3,) = the stresses conjugate to the controlled variables: A^-T sigma (sigma = sig[0]),
+    or sigma itself without ``general``."""
+    for i in range(3):
+        if general:
+            acc = 0.0
+            for j in range(3):
+                acc += Ainv[j, i] * sig[0, j]
+            sv[i] = acc
+        else:
+            sv[i] = sig[0, i]
+
+
+@njit(cache=True, inline="always")
+def _jacobian(tan, Ainv, general, free, nfree, J):
+    """J (nfree, nfree): d s'_a / d e'_b on the free entries: A^-T (d sigma / d de) A^-1, or the
+    tangent's own block without ``general``."""
+    for a in range(nfree):
+        for b in range(nfree):
+            if general:
+                acc = 0.0
+                for i in range(3):
+                    for j in range(3):
+                        acc += Ainv[i, free[a]] * tan[0, i, j] * Ainv[j, free[b]]
+                J[a, b] = acc
+            else:
+                J[a, b] = tan[0, free[a], free[b]]
+
+
 @njit(cache=True)
 def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0,
                       cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                       strain_controlled, de_start, target, tol, max_iter,
                       o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
-                      o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
+                      o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t, general, Ainv):
     """Newton with backtracking on the stress-controlled components of one point (npts = 1).
 
     strain_controlled : (3,) bool; de_start : (3,) start increment (strain-controlled entries are
     the prescribed ones); target : (3,) stress [Pa] of the stress-controlled entries.
+    ``general``: the controlled variables are e' = A de and their conjugates s' = A^-T sigma
+    (``driver.MixedControl.control_matrix``), with ``Ainv`` = A^-1 (3, 3): then ``de_start`` and
+    ``target`` are in those variables and Newton runs on the free entries of e' with the
+    Jacobian A^-T (d sigma / d de) A^-1; without it (A = I, ``Ainv`` unused) none of these
+    products is formed (the operations of the plain mixed control, the same bits).
     Outputs (the ``o_*`` buffers) hold the accepted update. Returns (iterations, residual,
-    d_eps (1, 3)); iterations = -1 when Newton did not converge in ``max_iter``, -2 when the
-    tangent on the stress-controlled components is singular (e.g. every hexagon open).
+    d_eps (1, 3), the strain increment itself whatever the variables); iterations = -1 when
+    Newton did not converge in ``max_iter``, -2 when the tangent on the stress-controlled
+    components is singular (e.g. every hexagon open, or a tie along which nothing resists).
     """
     nfree = 0
     free = np.empty(3, dtype=np.int64)
@@ -634,7 +690,11 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
         if not strain_controlled[k]:
             free[nfree] = k
             nfree += 1
-    de = de_start.copy().reshape(1, 3)
+    ep = de_start.copy().reshape(1, 3)       # the controlled variables (A = I: de itself)
+    de = ep.copy()
+    if general:
+        _to_strain(ep, Ainv, de)
+    sv = np.empty(3)                          # the conjugate stresses s' of the free entries
     ndir = d1.shape[1]
     # trial buffers for the backtracking line search
     b_d1 = np.empty((1, ndir)); b_d2 = np.empty((1, ndir)); b_al = np.empty((1, ndir))
@@ -649,40 +709,48 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
                   cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                   o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                   o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
+    _conjugate(o_sig, Ainv, general, sv)
     rn = 0.0
     for k in range(nfree):
-        rn = max(rn, abs(o_sig[0, free[k]] - target[free[k]]))
+        rn = max(rn, abs(sv[free[k]] - target[free[k]]))
     if nfree == 0:
         return 1, 0.0, de
     J = np.empty((nfree, nfree))
     r = np.empty(nfree)
+    trial_ep = ep.copy()
+    trial = de.copy()
     for it in range(1, max_iter + 1):
         if rn <= tol:
             return it, rn, de
         for a in range(nfree):
-            r[a] = o_sig[0, free[a]] - target[free[a]]
-            for b in range(nfree):
-                J[a, b] = o_tan[0, free[a], free[b]]
+            r[a] = sv[free[a]] - target[free[a]]
+        _jacobian(o_tan, Ainv, general, free, nfree, J)
         jmax = np.max(np.abs(J))
         if not (jmax > 0.0) or abs(np.linalg.det(J)) <= 1e-13 * jmax ** nfree:
             return -2, rn, de        # no stiffness on the stress-controlled components
         step = np.linalg.solve(J, r)
         lam = 1.0
-        trial = de.copy()
+        trial_ep[:, :] = ep
         while True:
             for a in range(nfree):
-                trial[0, free[a]] = de[0, free[a]] - lam * step[a]
+                trial_ep[0, free[a]] = ep[0, free[a]] - lam * step[a]
+            if general:
+                _to_strain(trial_ep, Ainv, trial)
+            else:
+                trial[:, :] = trial_ep
             update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, trial,
                           cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
                           b_d1, b_d2, b_al, b_N1, b_T1, b_N2, b_l1, b_l2, b_ca, b_sa, b_sl, b_op,
                           b_sig, b_tan, b_tanL, b_dPi, b_T3, b_w2, b_w2n, b_w2t)
+            _conjugate(b_sig, Ainv, general, sv)
             rt = 0.0
             for a in range(nfree):
-                rt = max(rt, abs(b_sig[0, free[a]] - target[free[a]]))
+                rt = max(rt, abs(sv[free[a]] - target[free[a]]))
             # the stress is continuous but only piecewise smooth (sliding switches): backtrack
             if rt < (1.0 - 1e-4 * lam) * rn or lam < 1e-8:
                 break
             lam *= 0.5
+        ep[:, :] = trial_ep
         de[:, :] = trial
         rn = rt
         o_d1[:, :] = b_d1; o_d2[:, :] = b_d2; o_alpha[:, :] = b_al
@@ -700,13 +768,15 @@ def mixed_step_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
 def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0,
                 cos_t, sin_t, omega, kn, kt, mu, r_g,
                 strain_controlled, d_eps, sig_start, d_sigma, k_start, n_steps, guess, tol, max_iter,
-                h_de, h_sig, h_it, h_nsl, h_nop, last_sliding):
+                h_de, h_sig, h_it, h_nsl, h_nop, last_sliding, general, A, Ainv):
     """``n_steps`` mixed-control steps of one point, in place on the state arrays (copies owned
     by the caller). Step k (1-based, from ``k_start`` + 1) targets sig_start + k d_sigma on the
     stress-controlled entries. Histories h_* get one row per step: strain increment (3,),
     stress (3,), Newton iterations, sliding and open counts. Returns the number of steps done
     (fewer than ``n_steps`` when a step failed), the last residual and the failure code of
-    ``mixed_step_single`` (0 if none)."""
+    ``mixed_step_single`` (0 if none). ``general``: d_eps, sig_start and d_sigma are in the
+    controlled variables e' = A de, s' = A^-T sigma (A (3, 3), Ainv its inverse; see
+    ``mixed_step_single``); ``guess`` and the histories are strain and stress themselves."""
     ndir = d1.shape[1]
     out_h = [np.empty((1, ndir)) for _ in range(10)]
     o_sl = np.empty((1, ndir), dtype=np.bool_)
@@ -716,6 +786,8 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, 
     o_w2 = np.empty(1); o_w2n = np.empty(1); o_w2t = np.empty(1)
     target = np.empty(3)
     de0 = guess.copy()
+    if general:
+        _to_controlled(guess, A, de0)
     rn = 0.0
     for k in range(n_steps):
         for c in range(3):
@@ -727,7 +799,8 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, 
                                        strain_controlled, de0, target, tol, max_iter,
                                        out_h[0], out_h[1], out_h[2], out_h[3], out_h[4], out_h[5],
                                        out_h[6], out_h[7], out_h[8], out_h[9], o_sl, o_op,
-                                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
+                                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t,
+                                       general, Ainv)
         if it < 0:
             return k, rn, it
         d1[:, :] = out_h[0]; d2[:, :] = out_h[1]; alpha[:, :] = out_h[2]
@@ -740,6 +813,9 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, 
             de0[c] = de[0, c]
             h_de[k, c] = de[0, c]
             h_sig[k, c] = o_sig[0, c]
+        if general:
+            _to_controlled(de[0], A, de0)      # the next step's guess, in e'
+
         h_it[k] = it
         ns = 0
         no = 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -15,7 +16,7 @@ from . import plots
 from .driver import MixedControlError
 from .experiment import (DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test, bifurcation_domain,
                          compile_kernels, probe_columns, state_at_eta)
-from .io import atomic_open, write_csv
+from .io import atomic_open, write_csv, write_table
 from .params import HParams, ParamError
 from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
 
@@ -178,6 +179,111 @@ def cmd_probes(args, stage):
     print(f"wrote {args.out}/probes.csv, stress_probes.csv, summary.json and Figs. 3, 6-9, 11")
 
 
+def cmd_burst(args, stage):
+    from . import burst
+    P = params_from(args)
+    if args.dc is None:
+        args.dc = 1e-3 * args.sigma2
+    try:
+        for R in args.ratios:
+            burst._check_ratio(R)
+        spec = burst.Specimen(args.width, args.height, args.density).validate()
+        dyn = burst.Dynamics(args.damping_ratio, args.steps_per_period).validate()
+    except ValueError as e:
+        raise opt.OptionError(str(e).replace("ratio =", "--ratios:", 1)) from None
+    if args.d_eps1 > args.path_strain:
+        raise opt.OptionError(f"--d-eps1 {args.d_eps1:g} is out of range: allowed 0 < value <= "
+                              f"--path-strain {args.path_strain:g}")
+    _check_path(args, DOMAIN_EPS1_MAX)
+    t0 = _start(args, stage, f"burst: R = {', '.join(f'{R:g}' for R in args.ratios)}, start at "
+                f"{', '.join(f'{f:g}' for f in args.start_fractions)} of the drained peak eta, "
+                f"sigma2 = {args.sigma2:g} Pa, dc = {args.dc:g} Pa")
+    res = burst.run_burst(P, args.ratios, args.start_fractions, args.dc, spec, dyn, args.d_eps1,
+                          args.path_strain, progress=lambda m: _say(stage, m))
+    cone = {}
+    if not args.no_cone:
+        _say(stage, "directional analysis: where each path direction enters the cone W2 <= 0, "
+                    "and the first W2 = 0 of the drained path")
+        from .experiment import domain_point
+        d = domain_point(P, args.sigma2, d_eps1=args.d_eps1)
+        cone["eta_first_w2"] = float(d.q_w2 / d.p_w2)
+        if np.isfinite(cone["eta_first_w2"]):
+            cone["cone_at_first_w2"] = burst.cone_at(P, cone["eta_first_w2"], args.d_eps1)
+        cone["paths"] = {f"{R:g}": v for R, v in
+                         burst.cone_entries(P, args.ratios, args.d_eps1).items()}
+    t_run = time.time() - t0
+    _say(stage, "writing burst.csv, history.csv, paths.csv, the figures and summary.json")
+    os.makedirs(args.out, exist_ok=True)
+    pth = lambda n: os.path.join(args.out, n)
+    write_table(pth("burst.csv"), {k: [r[k] for r in res.rows] for k in burst.BURST_COLUMNS})
+    stage.wrote("burst.csv")
+    hist = {k: [] for k in burst.HISTORY_COLUMNS}
+    for h in res.histories:
+        n = len(h["t"])
+        for k in burst.HISTORY_COLUMNS:
+            hist[k].extend([h[k]] * n if k in ("ratio", "start_fraction", "switch")
+                           else (range(n) if k == "step" else h[k]))
+    write_table(pth("history.csv"), hist)
+    stage.wrote("history.csv")
+    pcols = {k: [] for k in burst.PATH_COLUMNS}
+    for pi in res.paths:
+        pp, qq, ee = pi.path.invariants()
+        n = len(pp)
+        vals = {"ratio": [pi.ratio] * n, "start_fraction": [pi.start_fraction] * n,
+                "eps1": pi.path.eps[:, 0], "eps2": pi.path.eps[:, 1], "s1": pi.path.sigma[:, 0],
+                "s2": pi.path.sigma[:, 1], "p": pp, "q": qq, "eta": ee, "c": pi.c}
+        for k in pcols:
+            pcols[k].extend(vals[k])
+    write_csv(pth("paths.csv"), pcols)
+    stage.wrote("paths.csv")
+    outcome = {(r["ratio"], r["start_fraction"], r["switch"]): r["outcome"] for r in res.rows}
+    for h in res.histories:
+        h["outcome"] = outcome[(h["ratio"], h["start_fraction"], h["switch"])]
+    _, _, eta_d = res.drained.invariants()
+    paths = [{"ratio": pi.ratio, "start_fraction": pi.start_fraction, "eps1_start": pi.eps1_start,
+              "eps1": pi.path.eps[:, 0], "eta": pi.eta, "c": pi.c, "k_peak": pi.k_peak,
+              "p": pi.path.invariants()[0]}
+             for pi in res.paths]
+    plots.fig_burst_paths((res.drained.eps[:, 0], eta_d), paths, res.rows, pth("fig_burst_paths.png"),
+                          eta_w2=cone.get("eta_first_w2"),
+                          title=f"H-model, $\\sigma_2$ = {args.sigma2 / 1e3:g} kPa (drained peak "
+                                f"$\\eta$ = {res.eta_peak:.4f})")
+    plots.fig_burst_ke(res.histories, pth("fig_burst_ke.png"),
+                       title=f"Material point (homogeneous specimen {args.width:g} x {args.height:g} m, "
+                             f"{args.density:g} kg/m$^3$, $\\zeta$ = {args.damping_ratio:g}): "
+                             f"kinetic energy after the switch, c held at c_switch + {args.dc:g} Pa")
+    plots.fig_burst_residual(res.histories, pth("fig_burst_residual.png"))
+    stage.wrote("fig_burst_paths.png", "fig_burst_ke.png", "fig_burst_residual.png")
+    summary = {"params": {f.name: getattr(P, f.name) for f in dataclasses.fields(P) if f.init},
+               "options": {k: v for k, v in vars(args).items() if k not in ("func", "command")},
+               "eta_peak_drained": res.eta_peak, "directional_analysis": cone,
+               "runs": res.rows, "wall_time_s": t_run}
+    with atomic_open(pth("summary.json")) as f:
+        json.dump(summary, f, indent=1, default=float)
+    stage.wrote("summary.json")
+    print(f"drained peak eta = {res.eta_peak:.4f} at sigma2 = {args.sigma2:g} Pa"
+          + (f"; first W2 = 0 of the directional analysis at eta = {cone['eta_first_w2']:.4f}"
+             if cone else ""))
+    print("    R  start  eta_start  eta_peak_c  (fraction)  switch  static  outcome      E_c growth")
+    for r in res.rows:
+        print(f"{r['ratio']:5g}  {r['start_fraction']:5g}  {r['eta_start']:9.4f}  "
+              f"{r['eta_peak_c']:10.4f}  ({r['fraction_peak_c']:.3f})    {r['switch']:6s}  "
+              f"{'yes' if r['static_solution'] else 'none':6s}  {r['outcome']:11s}  {r['ke_growth']:.3g}")
+    if cone.get("cone_at_first_w2"):
+        ca = cone["cone_at_first_w2"]
+        rr = ca["ratio_range"]
+        print(f"cone W2 <= 0 at that state: alpha_eps {format_arcs(ca['alpha_eps_arcs'])} deg"
+              + (f", i.e. the proportional paths of R in [{rr[0]:.3f}, {rr[1]:.3f}]" if rr else ""))
+    if cone:
+        for R, ce in cone["paths"].items():
+            print(f"R = {R}: strain direction alpha_eps = {ce['alpha_eps']:.2f} deg enters the cone "
+                  f"W2 <= 0 of the drained path at eta = {ce['eta']:.4f}")
+    worst = max(r["energy_residual"] for r in res.rows) if res.rows else 0.0
+    print(f"energy balance: largest relative residual of a step {worst:.2e} (bound 1e-6)")
+    print(f"wrote {args.out}/burst.csv, history.csv, paths.csv, summary.json, fig_burst_*.png "
+          f"({t_run:.1f} s)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     R = opt.real
     ap = opt.Parser(prog="python -m hmodel",
@@ -220,6 +326,36 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default="out/hmodel", help="output folder")
     add_param_options(d)
     d.set_defaults(func=cmd_domain)
+
+    u = sub.add_parser("burst", help="proportional strain paths, c controlled past its peak: the "
+                                     "burst of kinetic energy (docs/burst.md)")
+    u.add_argument("--ratios", type=opt.reals(unit="-"), default=[-1.0, -1.5, -2.0, -3.0],
+                   help="comma-separated R of the paths d eps2 = R d eps1, each finite and < 0 "
+                        "(default %(default)s)")
+    u.add_argument("--start-fractions", type=opt.reals(0, 1), default=[0.90, 0.95],
+                   help="start states at these fractions of the drained peak eta, 0 < f < 1 "
+                        "(default %(default)s)")
+    u.add_argument("--dc", type=R(0, lo_open=False, unit="Pa"), default=None,
+                   help="step of c = s1 + R s2 held after the switch [Pa] (dG = B dc per unit "
+                        "thickness), >= 0 (default 1e-3 sigma2)")
+    u.add_argument("--sigma2", type=R(0, unit="Pa"), default=200e3, help="confining stress [Pa]")
+    u.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the paths [-]")
+    u.add_argument("--path-strain", type=R(0, 0.2, hi_open=False), default=0.03,
+                   help="axial strain of each proportional path from its start [-]")
+    u.add_argument("--density", type=R(0, unit="kg/m^3"), default=1600.0,
+                   help="bulk density of the specimen [kg/m^3] (dry granular: 1500-1700)")
+    u.add_argument("--width", type=R(0, unit="m"), default=0.05, help="specimen width B [m]")
+    u.add_argument("--height", type=R(0, unit="m"), default=0.1, help="specimen height H [m]")
+    u.add_argument("--damping-ratio", type=R(0, 1, lo_open=False), default=0.05,
+                   help="mass-proportional damping ratio of the lowest elastic mode, 0 <= zeta < 1")
+    u.add_argument("--steps-per-period", type=R(10, lo_open=False), default=20.0,
+                   help="time steps in the lowest elastic period T1, >= 10")
+    u.add_argument("--no-cone", action="store_true",
+                   help="skip the directional analysis (where each path's strain direction enters "
+                        "the cone W2 <= 0; the first W2 = 0 of the drained path)")
+    u.add_argument("--out", default="out/hmodel", help="output folder")
+    add_param_options(u)
+    u.set_defaults(func=cmd_burst)
     return ap
 
 

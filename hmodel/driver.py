@@ -22,7 +22,7 @@ from .params import HParams
 __all__ = [
     "MixedControl", "PathResult", "MixedControlError", "mixed_step", "run_path",
     "isotropic_state", "drained_biaxial", "undrained_biaxial", "proportional_strain",
-    "isotropic_compression", "stress_invariants",
+    "isotropic_compression", "stress_invariants", "proportional_strain_stress",
 ]
 
 
@@ -32,17 +32,27 @@ class MixedControlError(RuntimeError):
 
 @dataclass(frozen=True)
 class MixedControl:
-    """Per-step control of the components (11, 22, 12).
+    """Per-step control of three variables: the components (11, 22, 12) themselves, or, with a
+    ``control_matrix`` A, linear combinations of the normal ones (a kinematic tie and the stress
+    conjugate to it: the generalized loading variables of the Grenoble school).
 
-    strain_controlled : which components have a prescribed strain increment (the others a
+    strain_controlled : which variables have a prescribed strain increment (the others a
         prescribed stress increment).
-    d_eps : strain increment per step of the strain-controlled components (others ignored) [-].
-    d_sigma : stress increment per step of the stress-controlled components (others ignored) [Pa].
+    d_eps : strain increment per step of the strain-controlled variables (others ignored) [-].
+    d_sigma : stress increment per step of the stress-controlled variables (others ignored) [Pa].
+    control_matrix : None (the components themselves) or a 2 x 2 matrix A of the normal
+        components: the variables are e' = (A (de11, de22), de12) and their conjugate stresses
+        s' = (A^-T (s11, s22), s12), so that s'.e' = s11 de11 + s22 de22 + s12 de12: the second-order
+        work of an increment is the same in either set. E.g. the proportional strain path
+        d eps22 = R d eps11 under the stress c = s11 + R s22 conjugate to it is
+        A = ((1, 0), (-R, 1)): e'1 = de11, e'2 = de22 - R de11 (held at 0: the tie), s'1 = c
+        (``proportional_strain_stress``).
     """
 
     strain_controlled: tuple = (True, False, True)
     d_eps: tuple = (1e-5, 0.0, 0.0)
     d_sigma: tuple = (0.0, 0.0, 0.0)
+    control_matrix: tuple | None = None
 
     def __post_init__(self):
         sc = tuple(bool(b) for b in self.strain_controlled)
@@ -54,6 +64,32 @@ class MixedControl:
                 raise ValueError(f"MixedControl.{name} must be 3 finite numbers for (11, 22, 12), got {v}")
             object.__setattr__(self, name, tuple(float(x) for x in v))
         object.__setattr__(self, "strain_controlled", sc)
+        if self.control_matrix is not None:
+            A = np.asarray(self.control_matrix, dtype=float)
+            if A.shape != (2, 2) or not np.all(np.isfinite(A)):
+                raise ValueError(f"MixedControl.control_matrix must be a finite 2 x 2 matrix of the "
+                                 f"normal components (11, 22), got {self.control_matrix!r}")
+            if not np.linalg.cond(A) < 1e12:
+                raise ValueError(f"MixedControl.control_matrix {A.tolist()} is singular: allowed an "
+                                 "invertible matrix (the variables must determine the strain)")
+            object.__setattr__(self, "control_matrix", tuple(tuple(float(x) for x in row) for row in A))
+
+    def matrices(self):
+        """(general, A, A^-1): A (3, 3) maps the strain increment (11, 22, 12) to the controlled
+        variables; general is False (and A the identity) without a control_matrix."""
+        if self.control_matrix is None:
+            return False, np.eye(3), np.eye(3)
+        A = np.eye(3)
+        A[:2, :2] = self.control_matrix
+        return True, A, np.linalg.inv(A)
+
+    def to_controlled(self, v_strain=None, v_stress=None):
+        """The controlled variables of a strain increment (A de) or of a stress (A^-T sigma),
+        rows (..., 3) in (11, 22, 12)."""
+        _, A, Ainv = self.matrices()
+        if v_strain is not None:
+            return np.asarray(v_strain, float) @ A.T
+        return np.asarray(v_stress, float) @ Ainv
 
 
 class PathResult(NamedTuple):
@@ -98,13 +134,19 @@ def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_targ
                guess=None, rtol: float = 1e-10, max_iter: int = 40):
     """One mixed-control step of a single material point.
 
-    sigma_target : (3,) stress [Pa] the stress-controlled components must reach.
-    guess : (3,) initial strain increment (the strain-controlled entries are overwritten).
-    Returns (Increment, d_eps (3,), iterations). Raises MixedControlError if Newton fails.
+    sigma_target : (3,) stress [Pa] the stress-controlled variables must reach (with a
+        ``control_matrix``: the conjugate stresses s' = A^-T sigma, e.g. c = s11 + R s22).
+    guess : (3,) initial strain increment (11, 22, 12) (the strain-controlled variables are
+        overwritten by the prescribed ones).
+    Returns (Increment, d_eps (3,), iterations), d_eps the strain increment (11, 22, 12).
+    Raises MixedControlError if Newton fails.
     """
     check_state(state, params)
     sc = np.array(control.strain_controlled, dtype=np.bool_)
+    general, A, Ainv = control.matrices()
     de = np.zeros(3) if guess is None else np.array(guess, dtype=float)
+    if general:
+        de = A @ de
     de[sc] = np.asarray(control.d_eps)[sc]
     target = np.asarray(sigma_target, dtype=float)
     scale = max(float(np.max(np.abs(target))), 1e-3 * params.p0)
@@ -112,7 +154,8 @@ def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_targ
     args = kernel_args(state, params)
     out = _kernels.allocate_outputs(1, state.n_dir)
     it, rn, de_out = _kernels.mixed_step_single(
-        *args[:-1], *_material_args(params), True, True, sc, de, target, tol, int(max_iter), *out)
+        *args[:-1], *_material_args(params), True, True, sc, de, target, tol, int(max_iter), *out,
+        general, Ainv)
     if it < 0:
         raise MixedControlError(_failure_message(it, max_iter, rn, tol))
     return increment_from_outputs(state, de_out, out), de_out[0].copy(), int(it)
@@ -134,7 +177,8 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
     first step for which ``until(eps, sigma)`` is true (eps, sigma: (3,) arrays, eps counted
     from the start of the path).
 
-    Stress targets accumulate from the start stress: sigma_target = sigma_0 + k d_sigma. The steps
+    Stress targets accumulate from the start stress: sigma_target = sigma_0 + k d_sigma (in the
+    controlled variables: s'_0 + k d_sigma, s'_0 = A^-T sigma_0, with a control_matrix). The steps
     run in a Numba loop, ``chunk`` steps at a time (``until`` is checked between chunks and the
     chunk is replayed up to the first step that satisfies it). A step whose Newton iterations do
     not converge raises MixedControlError carrying the converged part as ``.partial``.
@@ -148,7 +192,9 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
     if keep_states:
         return _run_path_steps(state, params, control, n_steps, until, progress, label, rtol, max_iter)
     sig0 = to_voigt(state.stress)[0]
-    scale = max(float(np.max(np.abs(sig0))), float(np.max(np.abs(sig0 + n_steps * np.asarray(control.d_sigma)))),
+    general, A, Ainv = control.matrices()
+    s0 = control.to_controlled(v_stress=sig0) if general else sig0
+    scale = max(float(np.max(np.abs(s0))), float(np.max(np.abs(s0 + n_steps * np.asarray(control.d_sigma)))),
                 1e-3 * params.p0)
     tol = rtol * scale
     work = [a.copy() for a in kernel_args(state, params)[:-1]]
@@ -168,9 +214,9 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
         m = min(int(chunk), n_steps - done)
         saved = [a.copy() for a in work] + [sliding.copy()]
         sl = slice(done, done + m)
-        n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, m, guess, tol,
+        n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, s0, d_sig, done, m, guess, tol,
                                      int(max_iter), h_de[sl], h_sig[sl], h_it[sl], h_nsl[sl],
-                                     h_nop[sl], sliding)
+                                     h_nop[sl], sliding, general, A, Ainv)
         stop_at = None
         if until is not None and n > 0:
             eps_rows = np.cumsum(h_de[:done + n], axis=0)[done:]
@@ -181,9 +227,9 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
         if stop_at is not None and stop_at + 1 < n:
             work = saved[:-1]
             sliding = saved[-1]
-            n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, sig0, d_sig, done, stop_at + 1,
+            n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, s0, d_sig, done, stop_at + 1,
                                          guess, tol, int(max_iter), h_de[sl], h_sig[sl], h_it[sl],
-                                         h_nsl[sl], h_nop[sl], sliding)
+                                         h_nsl[sl], h_nop[sl], sliding, general, A, Ainv)
         if n > 0:
             guess = h_de[done + n - 1].copy()
         done += n
@@ -226,6 +272,7 @@ def _path_result(state, work, sliding, sig0, h_de, h_sig, h_it, h_nsl, h_nop) ->
 def _run_path_steps(state, params, control, n_steps, until, progress, label, rtol, max_iter):
     """The step-by-step Python loop of run_path, keeping every state."""
     sig0 = to_voigt(state.stress)[0]
+    s0 = control.to_controlled(v_stress=sig0) if control.control_matrix is not None else sig0
     dsig = np.asarray(control.d_sigma)
     eps_hist, sig_hist, iters = [np.zeros(3)], [sig0.copy()], [0]
     nsl, nop = [int(state.sliding.sum())], [int(state.is_open.sum())]
@@ -234,7 +281,7 @@ def _run_path_steps(state, params, control, n_steps, until, progress, label, rto
     guess = np.zeros(3)
     bar = _Progress(n_steps, label) if progress else None
     for k in range(1, n_steps + 1):
-        inc, de, it = mixed_step(state, params, control, sig0 + k * dsig, guess=guess, rtol=rtol,
+        inc, de, it = mixed_step(state, params, control, s0 + k * dsig, guess=guess, rtol=rtol,
                                  max_iter=max_iter)
         state, guess = inc.state, de
         eps = eps + de
@@ -308,6 +355,19 @@ def undrained_biaxial(d_eps1: float = 1e-5) -> MixedControl:
     """Isochoric biaxial: d_eps22 = -d_eps11 (the 2D undrained test)."""
     _check_step(d_eps1)
     return MixedControl(strain_controlled=(True, True, True), d_eps=(d_eps1, -d_eps1, 0.0))
+
+
+def proportional_strain_stress(ratio: float, d_c: float = 0.0) -> MixedControl:
+    """The proportional strain path d eps22 = ``ratio`` d eps11 (no shear strain) under control
+    of the stress conjugate to it, c = s11 + ratio s22 (``d_c`` [Pa] a step; c is held with 0):
+    the tie kept, d eps11 free (docs/burst.md). Along the path W2 = d eps11 dc, so a static
+    solution with dc > 0 exists only while c rises."""
+    if not (np.isfinite(ratio) and ratio != 0):
+        raise ValueError(f"ratio = {ratio!r} is out of range: allowed a finite non-zero ratio")
+    if not np.isfinite(d_c):
+        raise ValueError(f"d_c must be finite, got {d_c!r}")
+    return MixedControl(strain_controlled=(False, True, True), d_eps=(0.0, 0.0, 0.0),
+                        d_sigma=(d_c, 0.0, 0.0), control_matrix=((1.0, 0.0), (-ratio, 1.0)))
 
 
 def proportional_strain(d_eps1: float = 1e-5, ratio: float = -0.5) -> MixedControl:

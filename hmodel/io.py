@@ -7,7 +7,8 @@ from contextlib import contextmanager
 
 import numpy as np
 
-__all__ = ["atomic_open", "atomic_write_bytes", "write_csv", "save_figure", "read_csv", "file_mode"]
+__all__ = ["atomic_open", "atomic_write_bytes", "write_csv", "write_table", "save_figure", "read_csv",
+           "file_mode"]
 
 
 def _umask() -> int:
@@ -68,6 +69,32 @@ def write_csv(path, columns: dict, fmt: str = "%.10g"):
     data = np.column_stack([c.astype(float) for c in cols]) if cols else np.empty((0, 0))
     with atomic_open(path) as f:
         np.savetxt(f, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
+
+
+def write_table(path, columns: dict, fmt: str = "%.10g"):
+    """Write equal-length columns (name -> sequence) of numbers, booleans (0/1) and text,
+    atomically, with a header row: numbers as ``fmt``, a NaN as an empty field (a value that
+    does not exist, e.g. the peak of a path that does not peak), text as it is (no commas)."""
+    names = list(columns)
+    cols = [list(columns[k]) for k in names]
+    n = {len(c) for c in cols}
+    if len(n) > 1:
+        raise ValueError(f"columns of different lengths: { {k: len(c) for k, c in zip(names, cols)} }")
+
+    def cell(v):
+        if isinstance(v, str):
+            if "," in v or "\n" in v:
+                raise ValueError(f"text {v!r} holds a comma or a newline")
+            return v
+        if isinstance(v, (bool, np.bool_)):
+            return "1" if v else "0"
+        v = float(v)
+        return "" if np.isnan(v) else fmt % v
+
+    with atomic_open(path) as f:
+        f.write(",".join(names) + "\n")
+        for row in zip(*cols):
+            f.write(",".join(cell(v) for v in row) + "\n")
 
 
 def read_csv(path) -> dict:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import signal
 import sys
 import tempfile
@@ -28,7 +29,13 @@ class OptionError(ValueError):
 
 class Parser(argparse.ArgumentParser):
     """argparse with one-line errors: raises OptionError instead of printing the usage and
-    exiting (``run_cli`` prints it as ``error: ...`` and returns 2)."""
+    exiting (``run_cli`` prints it as ``error: ...`` and returns 2). A value that starts like a
+    negative number is a value, also a comma-separated list (``--ratios -1,-2``; argparse before
+    Python 3.13 takes "-1,-2" for an option): no option of these CLIs starts with a digit."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"-\.?\d")
 
     def error(self, message):
         raise OptionError(f"{message} (see {self.prog} --help)")

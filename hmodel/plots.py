@@ -15,7 +15,8 @@ import numpy as np  # noqa: E402
 from .io import save_figure  # noqa: E402
 
 __all__ = ["fig_q_eps1", "fig_epsv_eps1", "fig_probes", "fig_stress_components", "fig_polar_w2",
-           "fig_w2_split", "fig_domain", "fig_w2_normal_tangential", "polar_axes"]
+           "fig_w2_split", "fig_domain", "fig_w2_normal_tangential", "polar_axes",
+           "fig_burst_paths", "fig_burst_ke", "fig_burst_residual"]
 
 
 def _mark(ax, x, y, label="A", marker="o", color="C3", offset=(6, -12)):
@@ -219,4 +220,119 @@ def fig_domain(points, path):
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("Bifurcation domain (drained paths, dotted)")
+    save_figure(fig, path)
+
+
+_SWITCH_STYLE = {"below": ("o", "equilibrium expected"), "past": ("v", "burst expected")}
+_OUTCOME_COLOR = {"equilibrium": "C2", "failure": "C3", "undecided": "0.5"}
+
+
+def fig_burst_paths(drained, paths, rows, path, eta_w2=None, title=None):
+    """The proportional strain paths of docs/burst.md. Left: eta against eps1 [%] (from the
+    isotropic state) of the drained path and of every proportional path branching off it, each c
+    peak marked, with the stress ratio of the first W2 = 0 of the directional analysis
+    (``eta_w2``) dashed. Right: c - c_start [kPa] against eps1 - eps1_start [%] of each path,
+    the peak and the switch states marked and coloured by the run's outcome.
+    ``drained``: (eps1, eta) arrays; ``paths``: list of dicts with ratio, start_fraction,
+    eps1_start, eps1 (from the start of the path), eta, c, k_peak (None if none); ``rows``: the
+    burst.csv rows (ratio, start_fraction, switch, eps1_switch, c_switch, outcome); a path's
+    optional p (mean stress) masks its stress-free states (p = 0: every hexagon open)."""
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.8), constrained_layout=True)
+    a1.plot(100 * np.asarray(drained[0]), drained[1], "k-", lw=1.4, label="drained path")
+    ratios = sorted({p["ratio"] for p in paths}, reverse=True)
+    col = {R: f"C{i % 10}" for i, R in enumerate(ratios)}
+    fr = sorted({p["start_fraction"] for p in paths})
+    ls = {f: ("-", "--", ":", "-.")[i % 4] for i, f in enumerate(fr)}
+    for p in paths:
+        R, f = p["ratio"], p["start_fraction"]
+        e = 100 * (p["eps1_start"] + np.asarray(p["eps1"]))
+        lab = f"R = {R:g}" if f == fr[0] else None
+        # eta of a stress-free state (every hexagon open: p = 0) is not drawn
+        eta = np.where(np.asarray(p["p"]) > 0, p["eta"], np.nan) if "p" in p else p["eta"]
+        a1.plot(e, eta, ls[f], color=col[R], lw=1.0, label=lab)
+        a2.plot(100 * np.asarray(p["eps1"]), (np.asarray(p["c"]) - p["c"][0]) / 1e3, ls[f],
+                color=col[R], lw=1.0, label=f"R = {R:g}, start {f:g}")
+        k = p["k_peak"]
+        if k is not None:
+            a1.plot(e[k], p["eta"][k], "^", color=col[R], ms=7, mec="k", mew=0.5)
+    for r in rows:
+        p = next(q for q in paths if q["ratio"] == r["ratio"] and q["start_fraction"] == r["start_fraction"])
+        m = _SWITCH_STYLE[r["switch"]][0]
+        a2.plot(100 * r["eps1_switch"], (r["c_switch"] - p["c"][0]) / 1e3, m, ms=8,
+                color=_OUTCOME_COLOR.get(r["outcome"], "k"), mec="k", mew=0.6, zorder=5)
+    if eta_w2 is not None and np.isfinite(eta_w2):
+        a1.axhline(eta_w2, color="C3", ls="--", lw=0.9,
+                   label=rf"first $W_2 = 0$ of the directional analysis ($\eta$ = {eta_w2:.3f})")
+    a1.plot([], [], "^", color="0.4", mec="k", mew=0.5, label="peak of c on the path")
+    for sw, (m, what) in _SWITCH_STYLE.items():
+        a2.plot([], [], m, color="w", mec="k", label=f"switch {sw} ({what})")
+    for oc, c in _OUTCOME_COLOR.items():
+        a2.plot([], [], "s", color=c, label=oc)
+    # the right panel around the peaks: a path still rising steeply (no peak) leaves it
+    peaked = [p for p in paths if p["k_peak"] is not None]
+    if peaked:
+        e_pk = max(p["eps1"][p["k_peak"]] for p in peaked)
+        rise = [p["c"][p["k_peak"]] - p["c"][0] for p in peaked]
+        lo = min(min(np.min(np.asarray(p["c"])[np.asarray(p["eps1"]) <= 2 * e_pk] - p["c"][0])
+                     for p in peaked), 0.0)
+        a2.set_xlim(0, 100 * min(2.0 * max(e_pk, 1e-4), max(p["eps1"][-1] for p in paths)))
+        a2.set_ylim(lo / 1e3 - 0.1 * max(rise) / 1e3, 1.5 * max(max(rise), 1.0) / 1e3)
+    a1.set_xlabel(r"axial strain $\varepsilon_1$ [%]")
+    a1.set_ylabel(r"stress ratio $\eta = q/p$ [-]")
+    a1.set_title("drained path and proportional strain paths $d\\varepsilon_2 = R\\, d\\varepsilon_1$")
+    a2.set_xlabel(r"$\varepsilon_1 - \varepsilon_1^{start}$ [%]")
+    a2.set_ylabel(r"$c - c_{start}$ [kPa],  $c = \sigma_1 + R\,\sigma_2$")
+    a2.set_title("the stress conjugate to the path (W2 = 0 at its peak)")
+    for a in (a1, a2):
+        a.grid(alpha=0.3)
+        a.legend(fontsize=7)
+    if title:
+        fig.suptitle(title)
+    save_figure(fig, path)
+
+
+def fig_burst_ke(histories, path, title="Kinetic energy after the switch", unit="J/m",
+                 time_unit=("ms", 1e3)):
+    """E_c against the time since the switch, log axis, one panel per start state, every ratio
+    and switch (colour the ratio, solid ``past``, dashed ``below``; the end marked by the outcome).
+    ``histories``: list of dicts with ratio, start_fraction, switch, outcome, t [s], ke [J or J/m]."""
+    fr = sorted({h["start_fraction"] for h in histories})
+    ratios = sorted({h["ratio"] for h in histories}, reverse=True)
+    col = {R: f"C{i % 10}" for i, R in enumerate(ratios)}
+    fig, axes = plt.subplots(1, len(fr), figsize=(5.6 * len(fr), 4.4), squeeze=False,
+                             constrained_layout=True)
+    for ax, f in zip(axes[0], fr):
+        for h in (h for h in histories if h["start_fraction"] == f):
+            t = time_unit[1] * np.asarray(h["t"])
+            ke = np.asarray(h["ke"], float)
+            ok = ke > 0
+            ax.plot(t[ok], ke[ok], "-" if h["switch"] == "past" else "--", color=col[h["ratio"]],
+                    lw=1.1, label=f"R = {h['ratio']:g}, {h['switch']}: {h['outcome']}")
+            if ok.any():
+                ax.plot(t[ok][-1], ke[ok][-1], "x" if h["outcome"] == "failure" else "o",
+                        color=_OUTCOME_COLOR.get(h["outcome"], "k"), ms=7)
+        ax.set_yscale("log")
+        ax.set_xlabel(f"time since the switch [{time_unit[0]}]")
+        ax.set_ylabel(f"kinetic energy $E_c$ [{unit}]")
+        ax.set_title(f"start at {f:g} of the drained peak $\\eta$")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    fig.suptitle(title)
+    save_figure(fig, path)
+
+
+def fig_burst_residual(histories, path, bound=1e-6, title="Energy balance of each time step"):
+    """The relative residual of the discrete energy balance (Eq. 1, second-order form) at every
+    step of every run, log axis, with the stated bound."""
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for i, h in enumerate(histories):
+        r = np.asarray(h["energy_residual"], float)[1:]
+        ax.semilogy(np.arange(1, len(r) + 1), np.maximum(r, 1e-18), lw=0.7, color=f"C{i % 10}",
+                    label=f"R = {h['ratio']:g}, start {h['start_fraction']:g}, {h['switch']}")
+    ax.axhline(bound, color="k", ls="--", lw=0.9, label=f"bound {bound:g}")
+    ax.set_xlabel("time step after the switch")
+    ax.set_ylabel(r"$|\Delta E_c - (\Delta W_2^{ext} - \Delta W_2^{int} - \Delta D)|$ / step scale [-]")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=6, ncol=2)
+    ax.set_title(title)
     save_figure(fig, path)

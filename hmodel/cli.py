@@ -16,7 +16,7 @@ from . import plots
 from .driver import MixedControlError
 from .experiment import (DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test, bifurcation_domain,
                          compile_kernels, probe_columns, state_at_eta)
-from .io import atomic_open, write_csv, write_table
+from .io import atomic_open, json_safe, write_csv, write_table
 from .params import HParams, ParamError
 from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
 
@@ -259,7 +259,7 @@ def cmd_burst(args, stage):
                "eta_peak_drained": res.eta_peak, "directional_analysis": cone,
                "runs": res.rows, "wall_time_s": t_run}
     with atomic_open(pth("summary.json")) as f:
-        json.dump(summary, f, indent=1, default=float)
+        json.dump(json_safe(summary), f, indent=1, allow_nan=False)
     stage.wrote("summary.json")
     print(f"drained peak eta = {res.eta_peak:.4f} at sigma2 = {args.sigma2:g} Pa"
           + (f"; first W2 = 0 of the directional analysis at eta = {cone['eta_first_w2']:.4f}"

@@ -8,7 +8,7 @@ from contextlib import contextmanager
 import numpy as np
 
 __all__ = ["atomic_open", "atomic_write_bytes", "write_csv", "write_table", "save_figure", "read_csv",
-           "file_mode"]
+           "file_mode", "json_safe"]
 
 
 def _umask() -> int:
@@ -95,6 +95,23 @@ def write_table(path, columns: dict, fmt: str = "%.10g"):
         f.write(",".join(names) + "\n")
         for row in zip(*cols):
             f.write(",".join(cell(v) for v in row) + "\n")
+
+
+def json_safe(obj):
+    """``obj`` with every non-finite float (a value that does not exist, e.g. the peak of a path
+    that does not peak) as None, numpy scalars and arrays as Python ones: strict JSON (json.dump
+    would write NaN, which JSON readers refuse)."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    return obj
 
 
 def read_csv(path) -> dict:

@@ -2,6 +2,7 @@
 the c peak of the proportional strain path, the static solve under c control, the material
 point's dynamics (Newmark average acceleration) and the outcome rule."""
 import csv
+import json
 import math
 
 import numpy as np
@@ -265,6 +266,10 @@ def test_burst_cli(tmp_path, capsys):
     assert {p["ratio"] for p in paths} == {"-1", "-2"}
     for f in ("fig_burst_paths.png", "fig_burst_ke.png", "fig_burst_residual.png", "summary.json"):
         assert (out / f).stat().st_size > 1000
+    def no_nan(c):
+        raise AssertionError(f"summary.json holds {c}: not JSON")
+    s = json.loads((out / "summary.json").read_text(), parse_constant=no_nan)
+    assert s["options"]["ratios"] == [-1.0, -2.0] and s["params"]["kn"] == 1e6
     assert "failure" in capsys.readouterr().out
 
 

@@ -186,6 +186,13 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
     M = mass_matrix(prob, cfg.density)
     dc = cfg.dc_value
     rule = cfg.rule
+    imp = (f", {sc.imperfection} imperfection (phi_g {sc.imp_phi_g}, alpha0 {sc.imp_alpha0}, size "
+           f"{sc.imp_size}, angle {sc.imp_angle})" if sc.imperfection else ", perfect specimen")
+    say(f"fem burst: {prob.nel} elements, {prob.npts} points, n_dir {params.n_dir}{imp}; "
+        f"sigma2 {sc.sigma2:g} Pa; R {', '.join(f'{r:g}' for r in cfg.ratios)}; f "
+        f"{', '.join(f'{f:g}' for f in cfg.start_fractions)}; dc {dc:g} Pa; density "
+        f"{cfg.density:g} kg/m^3; damping ratio {cfg.damping_ratio:g}; {cfg.steps_per_period} "
+        f"steps a period; d_eps1 {sc.d_eps1:g} (drained), {cfg.path_d_eps1:g} (paths)")
 
     t0 = time.perf_counter()
     mp_curve = material_point_curve(params, MP_EPS1_MAX)

@@ -120,14 +120,20 @@ def _fitted_omega(x, dt):
     return math.acos(c) / dt
 
 
+def _analytic_omega(p36, ratio):
+    """omega [rad/s] of the 1 x 1 tied specimen from the material point alone: k_G / m_G with
+    k_G = dG/dU1 = (B/H) e:D:e, D hmodel's elastic tangent at the isotropic state."""
+    D = update_full(isotropic_state(p36), np.zeros((2, 2)), p36, allow_sliding=False).tangent
+    e = np.diag([1.0, ratio])          # strain per unit eps1 along the path, compression +
+    kG = B / H * np.einsum("ij,ijkl,kl->", e, D, e)
+    return math.sqrt(kG / generalized_mass(DENSITY, B, H, ratio))
+
+
 def _single_element_omega(p36, ratio, scheme=Newmark(), mass_scale=1.0):
     """(omega_num measured, omega_num predicted by Newmark average acceleration from the
     analytic omega, max balance residual) of the elastic 1 x 1 specimen released under dG."""
     prob, tie = _elastic_single_element(p36, ratio)
-    D = update_full(isotropic_state(p36), np.zeros((2, 2)), p36, allow_sliding=False).tangent
-    e = np.diag([1.0, ratio])          # strain per unit eps1 along the path, compression +
-    kG = B / H * np.einsum("ij,ijkl,kl->", e, D, e)            # dG/dU1 [N/m / m]
-    omega = math.sqrt(kG / generalized_mass(DENSITY, B, H, ratio))
+    omega = _analytic_omega(p36, ratio)
     M = mass_matrix(prob) * mass_scale
     t1 = 2 * math.pi / omega
     # dG: an amplitude of ~1e-9 strain, linear to ~1e-9, 5e4 x the Newton tolerance
@@ -136,6 +142,23 @@ def _single_element_omega(p36, ratio, scheme=Newmark(), mass_scale=1.0):
     dt = r.dt
     return (_fitted_omega(r.history["U1"], dt), 2 * math.atan(omega * dt / 2) / dt,
             float(r.history["balance_residual"].max()))
+
+
+@pytest.mark.parametrize("zeta", [0.05, 0.2])
+def test_damping_decay_per_step(p36, zeta):
+    """The stated damping, exactly: C = 2 zeta omega_1 M on the 1 x 1 oscillator (omega_1 the
+    analytic omega) and Newmark average acceleration (the trapezoidal rule on (u, v)) multiply
+    the amplitude by rho per step, rho^2 = (1 - zeta W + W^2/4) / (1 + zeta W + W^2/4), W = omega
+    dt. Measured by fitting x(n+1) = p x(n) + q x(n-1) + const (q = -rho^2) to 1e-6."""
+    prob, tie = _elastic_single_element(p36, -2.0)
+    omega = _analytic_omega(p36, -2.0)
+    r = hold(tie, mass_matrix(prob), np.zeros(prob.ndofs), 1e-5 * p36.p0 * B, 2 * math.pi / omega,
+             20, zeta, BurstRule(), max_steps=60)
+    x = r.history["U1"]
+    A = np.column_stack([x[1:-1], x[:-2], np.ones(len(x) - 2)])
+    _, q, _ = np.linalg.lstsq(A, x[2:], rcond=None)[0]
+    W = omega * r.dt
+    assert -q == pytest.approx((1 - zeta * W + W * W / 4) / (1 + zeta * W + W * W / 4), rel=1e-6)
 
 
 @pytest.mark.parametrize("ratio", [-2.0, -0.5])

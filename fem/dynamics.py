@@ -35,7 +35,7 @@ from skfem.helpers import dot
 
 from hmodel.burst_rule import BurstRule, decide
 from .problem import Biaxial
-from .solver import NewtonError
+from .solver import FreeSolver, NewtonError
 
 __all__ = ["DENSITY", "mass_matrix", "generalized_mass", "Tie", "TiedStatic", "Newmark",
            "Motion", "newmark_step", "TiedDynamics", "lowest_mode", "HoldResult", "hold",
@@ -177,13 +177,17 @@ class TiedDynamics:
     """The reduced system of the tied specimen from a committed state (the switch) with
     displacement ``u_ref``: mass M = T^T M T, mass-proportional damping C = ``alpha`` M
     (alpha = 2 zeta omega_1 [1/s]), the external force (0, ..., G_switch + ``dG``) with G_switch
-    the generalized force of the committed state (``start``), and the internal force and tangent
-    at reduced coordinates z from the committed material state (``force``, ``tangent``)."""
+    the generalized force of the committed state (``start``), the internal force at reduced
+    coordinates z from the committed material state (``force``) and Newton's linear solve with
+    its tangent (``solve``)."""
 
     def __init__(self, tie: Tie, mass, u_ref: np.ndarray, dG: float, alpha: float):
         prob = tie.prob
         self.tie, self.prob = tie, prob
+        self.mass = mass
         self.M = tie.reduce_matrix(mass)
+        self.solver = FreeSolver(tie.free)
+        self._mass_key = None
         self.alpha = float(alpha)
         self.dG = float(dG)
         self.u_ref = np.array(u_ref, dtype=float)
@@ -209,8 +213,38 @@ class TiedDynamics:
         trial = prob.material.trial(eps - self._eps_committed)
         return self.tie.reduce_vector(prob.internal_force(trial.sigma)), trial
 
-    def tangent(self, trial) -> sp.csc_matrix:
-        return self.tie.reduce_matrix(self.prob.stiffness(trial.D))
+    def _mass_on(self, K) -> np.ndarray:
+        """The mass's entries at K's stored entries (K.data's order): K + c M keeps K's one
+        pattern (a sum by scipy drops the entries that cancel, and a new pattern costs the
+        linear solver its kept column order)."""
+        key = self._mass_key
+        if key is None or not (np.array_equal(key[0], K.indptr) and np.array_equal(key[1], K.indices)):
+            rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
+            mk = np.asarray(self.mass[rows, K.indices]).ravel()
+            if not math.isclose(float(abs(mk).sum()), float(abs(self.mass).sum()), rel_tol=1e-12):
+                raise ValueError("the mass matrix has entries outside the stiffness's pattern")
+            self._mass_key = key = (K.indptr.copy(), K.indices.copy(), mk)
+        return key[2]
+
+    def solve(self, trial, mass_coeff: float, r: np.ndarray) -> np.ndarray:
+        """S^{-1} r for the reduced S = T^T (K + mass_coeff M) T, K the tangent of ``trial``:
+        bordered, so that the one sparse LU is of the free dofs' block S_ff = S[free][:, free]
+        (``FreeSolver``: the static solver, its column order kept between calls), without the
+        dense row and column of U1 (the homogeneous mode touches every dof):
+
+            [[S_ff, b], [c^T, d]] (x, U1) = (r_f, r_1),  b = (S a)_f, c = (S^T a)_f, d = a.S a
+            U1 = (r_1 - c . S_ff^-1 r_f) / (d - c . S_ff^-1 b),  x = S_ff^-1 (r_f - b U1)."""
+        K = self.prob.stiffness(trial.D)
+        S = sp.csr_matrix((K.data + mass_coeff * self._mass_on(K), K.indices, K.indptr),
+                          shape=K.shape)
+        a, free = self.tie.a, self.tie.free
+        Sa, aS = S @ a, S.T @ a
+        x = self.solver.solve(S, np.column_stack([r[:-1], Sa[free]]))
+        den = float(a @ Sa - aS[free] @ x[:, 1])
+        if not (math.isfinite(den) and den != 0.0):
+            raise NewtonError("singular dynamic tangent (generalized dof)")
+        u1 = (r[-1] - aS[free] @ x[:, 0]) / den
+        return np.append(x[:, 0] - x[:, 1] * u1, u1)
 
     def commit(self, z: np.ndarray, trial) -> None:
         """Commit the material's ``trial`` of the converged step ending at z."""
@@ -230,7 +264,6 @@ def newmark_step(system: TiedDynamics, m: Motion, dt: float, scheme: Newmark = N
     M, alpha = system.M, system.alpha
     du = dt * m.v + 0.5 * dt * dt * m.a            # constant-acceleration predictor
     base = dt * m.v + dt * dt * (0.5 - beta) * m.a
-    S_mass = (cm + cv * alpha) * M
     for k in range(max_iter + 1):
         a1 = cm * (du - base)
         v1 = m.v + dt * ((1.0 - gamma) * m.a + gamma * a1)
@@ -246,11 +279,7 @@ def newmark_step(system: TiedDynamics, m: Motion, dt: float, scheme: Newmark = N
             return Motion(m.z + du, v1, a1, f1), trial, k, rn
         if k == max_iter:
             break
-        S = (system.tangent(trial) + S_mass).tocsc()
-        try:
-            du = du - spla.splu(S).solve(r)
-        except RuntimeError as e:
-            raise NewtonError(f"singular dynamic tangent ({e})") from None
+        du = du - system.solve(trial, cm + cv * alpha, r)
     raise NewtonError(f"time step did not converge in {max_iter} Newton iterations (residual "
                       f"{rn:.3e} > rtol = {rtol:.1e} x sigma2 x height)")
 

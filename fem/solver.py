@@ -72,6 +72,7 @@ class FreeSolver:
         self._ordered = None        # (pattern (indptr, indices), PatternGather, inverse order)
 
     def solve(self, K, b: np.ndarray) -> np.ndarray:
+        """K[free][:, free]^{-1} b, b (n_free,) or (n_free, k) (k right-hand sides, one LU)."""
         with warnings.catch_warnings():
             warnings.simplefilter("error", spla.MatrixRankWarning)
             try:
@@ -79,7 +80,7 @@ class FreeSolver:
                 if o is not None and np.array_equal(o[0][0], K.indptr) \
                         and np.array_equal(o[0][1], K.indices):
                     lu = spla.splu(o[1](K), permc_spec="NATURAL")
-                    if np.array_equal(lu.perm_c, np.arange(b.size)):
+                    if np.array_equal(lu.perm_c, np.arange(b.shape[0])):
                         x = np.empty_like(b)
                         x[o[2]] = lu.solve(b)
                         return x

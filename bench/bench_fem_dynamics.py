@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from fem.__main__ import _fem_kernels, _warm_indicators          # noqa: E402
+from fem.__main__ import _fem_kernels, _warm_specimen            # noqa: E402
 from fem.biaxial import BiaxialConfig, build_problem              # noqa: E402
 from fem.burst import _averages                                   # noqa: E402
 from fem.dynamics import Tie, TiedStatic, hold, lowest_mode, mass_matrix   # noqa: E402
@@ -66,7 +66,7 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=200, help="time steps timed")
     ap.add_argument("--path-steps", type=int, default=40, help="tied static steps timed")
     a = ap.parse_args(argv)
-    compile_kernels(extra=_fem_kernels(), warm=_warm_indicators)
+    compile_kernels(extra=_fem_kernels(indicators=False), warm=_warm_specimen)
     load0 = os.getloadavg()
     cfg = BiaxialConfig(nx=a.nx, ny=a.ny, n_dir=a.n_dir,
                         imperfection=None if a.imperfection == "none" else "band", imp_phi_g=15.0,

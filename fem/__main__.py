@@ -163,13 +163,26 @@ def check_config(cfg: BiaxialConfig) -> None:
                      f"fewer cells or orientations ({options})")
 
 
-def _warm_indicators():
-    """Compile fem's own kernels on tiny cases: the local indicators on one elastic point, the
-    adapter's flag counts (and hmodel's update kernel through it, both drivers) on 70 and 4
-    points of 8 orientations, the stiffness on one element, the global check's banded kernels
-    on 2 x 4 elements."""
+def _warm_specimen():
+    """Compile the specimen's kernels on tiny cases: the adapter's flag counts (and hmodel's
+    update kernel through it, both drivers) on 70 and 4 points of 8 orientations, the stiffness
+    on one element."""
     from hmodel import HParams
     from .adapter import MaterialField
+    from .mesh import rectangle
+    from .problem import Biaxial
+    p = HParams(n_dir=8)
+    for n in (70, 4):
+        mf = MaterialField(n, [(p, np.arange(n))])
+        t = mf.trial(np.zeros((2, 2, n)))
+        mf.pattern_changes(t, t)
+    Biaxial(rectangle(1.0, 1.0, 1, 1), p).stiffness(t.D)       # 1 quad: the 4 points of t
+
+
+def _warm_indicators():
+    """Compile fem's own kernels on tiny cases: the specimen's (``_warm_specimen``), the local
+    indicators on one elastic point, the global check's banded kernels on 2 x 4 elements."""
+    from hmodel import HParams
     from .indicators import GlobalCheck, local_indicators
     from .mesh import rectangle
     from .problem import Biaxial
@@ -177,21 +190,19 @@ def _warm_indicators():
     D = (np.einsum("ij,kl->ijkl", I, I) + np.einsum("ik,jl->ijkl", I, I)
          + np.einsum("il,jk->ijkl", I, I))[..., None] * 1e6
     local_indicators(D, n_sphere=8)
-    p = HParams(n_dir=8)
-    for n in (70, 4):
-        mf = MaterialField(n, [(p, np.arange(n))])
-        t = mf.trial(np.zeros((2, 2, n)))
-        mf.pattern_changes(t, t)
-    Biaxial(rectangle(1.0, 1.0, 1, 1), p).stiffness(D[..., [0] * 4])
-    b = Biaxial(rectangle(1.0, 2.0, 2, 4), p)
+    _warm_specimen()
+    b = Biaxial(rectangle(1.0, 2.0, 2, 4), HParams(n_dir=8))
     GlobalCheck(b)(b.stiffness(D[..., [0] * b.npts]))
 
 
-def _fem_kernels():
+def _fem_kernels(indicators: bool = True):
+    """fem's Numba kernels: the adapter's and the problem's, and with ``indicators`` the
+    bifurcation checks' (which ``fem burst`` does not use)."""
     import numba
 
-    from . import adapter, indicators, problem
-    return [v for m in (indicators, adapter, problem) for v in vars(m).values()
+    from . import adapter, indicators as ind, problem
+    mods = (ind, adapter, problem) if indicators else (adapter, problem)
+    return [v for m in mods for v in vars(m).values()
             if isinstance(v, numba.core.registry.CPUDispatcher)]
 
 
@@ -256,7 +267,7 @@ def _run_burst(args, stage) -> int:
     cfg.validate()
     check_config(spec)
     opt.check_out_dir(args.out)
-    compile_kernels(extra=_fem_kernels(), warm=_warm_indicators)
+    compile_kernels(extra=_fem_kernels(indicators=False), warm=_warm_specimen)
 
     def progress(line):
         if not stage.written and line.startswith("drained path: start"):

@@ -53,7 +53,8 @@ BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction
                  "ke_growth", "ke_max", "w2_ext_end", "w2_int_end", "t_end", "steps",
                  "energy_residual", "eq1_residual", "t1", "dt", "eps1_switch", "eta_switch",
                  "mp_c_peak", "mp_eta_peak_c", "c_peak_error", "eta_peak_error",
-                 "mode_band_share", "band_area_share", "newton_iters_mean", "seconds"]
+                 "mode_band_share", "band_area_share", "mode_nonuniform", "newton_iters_mean",
+                 "seconds"]
 PATH_COLUMNS = ["ratio", "start_fraction", "source", "step", "eps1", "eps2", "s1", "s2", "p",
                 "q", "eta", "c"]
 
@@ -159,15 +160,20 @@ def _restore(prob, snap: Snapshot) -> None:
     prob.material.states = list(snap.states)
 
 
-def _band_share(prob, u) -> tuple:
-    """(share of the strain of the displacement u, sum |eps|^2 dx, in the weak elements; their
-    share of the area), NaN without an imperfection: how localized a mode is in the band."""
+def _mode_measures(prob, ratio: float, v: np.ndarray) -> tuple:
+    """How a collapse mode v (ndofs,) (the velocity at the end of a failure run) departs from
+    the homogeneous motion: (share of its strain, sum |eps(v)|^2 dx, in the weak elements, their
+    share of the area: NaN without an imperfection; |v - a U1'| / |v|, the part of v off the
+    tie's homogeneous mode a, U1' = the platen's velocity)."""
+    tie = Tie(prob, ratio)
+    w = v - tie.a * float(-np.mean(v[tie.top_y]))
+    nonuniform = float(np.linalg.norm(w) / np.linalg.norm(v))
     if not len(prob.weak_elements):
-        return math.nan, math.nan
-    g = prob.per_element(np.sum(prob.strain(u).reshape(4, -1) ** 2, axis=0)) * prob.dx.sum(axis=1)
+        return math.nan, math.nan, nonuniform
     area = prob.dx.sum(axis=1)
-    w = prob.weak_elements
-    return float(g[w].sum() / g.sum()), float(area[w].sum() / area.sum())
+    g = prob.per_element(np.sum(prob.strain(v).reshape(4, -1) ** 2, axis=0)) * area
+    wk = prob.weak_elements
+    return float(g[wk].sum() / g.sum()), float(area[wk].sum() / area.sum()), nonuniform
 
 
 def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
@@ -294,8 +300,8 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                     if hist_w is not None:
                         for k in range(len(h["t"])):
                             hist_w.write(dict(tag, **{c: h[c][k] for c in HISTORY_COLUMNS}))
-                    share, area = _band_share(prob, res.v) if res.outcome == "failure" \
-                        else (math.nan, math.nan)
+                    share, area, nonuniform = (_mode_measures(prob, float(R), res.v)
+                                               if res.outcome == "failure" else (math.nan,) * 3)
                     row = dict(base, switch=name, c_switch=snap.row["c"], outcome=res.outcome,
                                ke_growth=ke_growth(h["ke"]), ke_max=float(h["ke"].max()),
                                w2_ext_end=h["w2_ext"][-1], w2_int_end=h["w2_int"][-1],
@@ -304,6 +310,7 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                                eq1_residual=float(h["eq1_residual"].max()), t1=t1, dt=res.dt,
                                eps1_switch=snap.row["eps1"], eta_switch=snap.row["eta"],
                                mode_band_share=share, band_area_share=area,
+                               mode_nonuniform=nonuniform,
                                newton_iters_mean=float(h["newton_iters"][1:].mean())
                                if len(h["t"]) > 1 else 0.0,
                                seconds=res.seconds)
@@ -489,10 +496,13 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
                                   f"(T1 = {1e3 * res.t1:.3f} ms)")
         ax.plot(t[-1], h["ke"][-1], "x" if res.outcome == "failure" else "o", color=color[s],
                 mfc="none")
+        ax.semilogy(t, np.maximum(h["w2_ext"][1:], 1e-300), ":", color=color[s], lw=0.9,
+                    label=r"$W_{2,ext} = dG\,\Delta U_1$ (Eq. 1: $E_c \leq W_{2,ext}$ while "
+                          r"$W_{2,int} \geq 0$)" if (tag, res) == runs[0] else None)
     ax.set_xlabel("time since the switch t [ms]")
     ax.set_ylabel(r"kinetic energy $E_c$ [J/m] (per unit thickness)")
     ax.set_title("G held at G_switch + dG: kinetic energy (x: failure, o: equilibrium / "
-                 "undecided, by hmodel.burst_rule)", fontsize=8)
+                 "undecided, by hmodel.burst_rule); dotted: the work of dG", fontsize=8)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
     save(fig, "ke.png")

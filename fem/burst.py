@@ -491,14 +491,17 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
         h = res.history
         s = (tag["ratio"], tag["start_fraction"])
         t = 1e3 * h["t"][1:]
-        ax.semilogy(t, np.maximum(h["ke"][1:], 1e-300), style[tag["switch"]], color=color[s],
+        pos = lambda x: np.where(x > 0, x, np.nan)         # noqa: E731 (log axis: E_c = 0 left out)
+        ax.semilogy(t, pos(h["ke"][1:]), style[tag["switch"]], color=color[s],
                     lw=1.3, label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}: {res.outcome} "
                                   f"(T1 = {1e3 * res.t1:.3f} ms)")
         ax.plot(t[-1], h["ke"][-1], "x" if res.outcome == "failure" else "o", color=color[s],
                 mfc="none")
-        ax.semilogy(t, np.maximum(h["w2_ext"][1:], 1e-300), ":", color=color[s], lw=0.9,
+        ax.semilogy(t, pos(h["w2_ext"][1:]), ":", color=color[s], lw=0.9,
                     label=r"$W_{2,ext} = dG\,\Delta U_1$ (Eq. 1: $E_c \leq W_{2,ext}$ while "
                           r"$W_{2,int} \geq 0$)" if (tag, res) == runs[0] else None)
+    if not any(np.any(res.history["ke"] > 0) for _, res in runs):
+        ax.set_yscale("linear")                       # dc = 0: nothing moved, E_c = 0
     ax.set_xlabel("time since the switch t [ms]")
     ax.set_ylabel(r"kinetic energy $E_c$ [J/m] (per unit thickness)")
     ax.set_title("G held at G_switch + dG: kinetic energy (x: failure, o: equilibrium / "
@@ -511,7 +514,8 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
     for tag, res in runs:
         h = res.history
         s = (tag["ratio"], tag["start_fraction"])
-        ax.semilogy(h["step"][1:], np.maximum(h["balance_residual"][1:], 1e-18),
+        ax.semilogy(h["step"][1:], np.where(h["balance_residual"][1:] > 0,
+                                            h["balance_residual"][1:], np.nan),
                     style[tag["switch"]], color=color[s], lw=1,
                     label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}")
     ax.axhline(1e-6, color="k", lw=0.8, ls=":", label="1e-6")

@@ -195,13 +195,15 @@ class TiedDynamics:
         self.f_ext = None
 
     def start(self) -> np.ndarray:
-        """At u_ref with the committed material: sets f_ext = (0, ..., G_switch + dG) and returns
-        the reduced internal force f(0) = T^T f_int there (G_switch = its last entry)."""
-        prob = self.prob
-        self._eps_committed = prob.strain(self.u_ref)
-        f0 = self.tie.reduce_vector(prob.internal_force(prob.material.stress()))
-        self.f_ext = np.zeros(self.tie.size)
-        self.f_ext[-1] = f0[-1] + self.dG
+        """At u_ref with the committed material: returns the reduced internal force f(0) = T^T
+        f_int there, as ``force`` gives it (the material's trial of a zero increment), and sets
+        f_ext = f(0) + (0, ..., dG): G_switch = f(0)'s last entry, and the switch is an exact
+        equilibrium of the discrete system (its static Newton residual, <= rtol sigma2 H on the
+        free dofs, is kept as a load): with dG = 0 nothing moves, E_c = 0."""
+        self._eps_committed = self.prob.strain(self.u_ref)
+        f0, _ = self.force(np.zeros(self.tie.size))
+        self.f_ext = f0.copy()
+        self.f_ext[-1] += self.dG
         return f0
 
     def force(self, z: np.ndarray):
@@ -341,8 +343,9 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
 
     Every step records (HISTORY_COLUMNS): t [s]; eps1, eps2; c = G/B [Pa]; G = a . f_int [N/m];
     U1 [m]; ke = v.M v/2; w_ext, w_int, damping: the trapezoidal work of f_ext, f_int and C v
-    over du [J/m] (a held force: w_ext = G_ext U1); w2_ext = sum du . (f_ext - f_ext(0)) =
-    dG U1, w2_int = sum du . ((f(n) + f(n+1))/2 - f(0)) with f(0) the switch's; the balance
+    over du [J/m] (a held force: w_ext = G_ext U1, up to the switch's Newton residual kept in
+    f_ext, see ``TiedDynamics.start``); w2_ext = sum du . (f_ext - f_ext(0)) = dG U1, w2_int =
+    sum du . ((f(n) + f(n+1))/2 - f(0)), f_ext(0) = f(0) the switch's (an equilibrium); the balance
     residual of the step |dE_c - (dW_ext - dW_int - dD)| over the largest second-order energy
     so far, max(E_c, |W2_ext|, |W2_int|, D) (the first-order work of the prestress, G_switch U1,
     is orders larger and would hide any residual); the residual of Eq. 1 in second-order form,
@@ -369,12 +372,11 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
     g_sw = float(f0[-1])
     M = system.M
     n = tie.size
-    # at rest: M a0 = f_ext - f(0) (the switch's Newton residual on the free dofs, and dG)
+    # at rest: M a0 = f_ext - f(0) = (0, ..., dG)
     z0 = np.zeros(n)
     a0 = spla.splu(M.tocsc()).solve(system.f_ext - f0)
     m = Motion(z0, np.zeros(n), a0, f0)
-    f_ext0 = np.zeros(n)
-    f_ext0[-1] = g_sw
+    f_ext0 = f0                                   # the switch: f_ext(0) = f(0)
     h = {k: np.zeros(n_cap + 1) for k in HISTORY_COLUMNS}
     h["eps1"][0], h["eps2"][0] = eps_ref
     h["c"][0], h["G"][0] = g_sw / B, g_sw

@@ -151,6 +151,17 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, monkeypatch
     assert not out.exists()
 
 
+def test_dc_zero_holds_the_switch_equilibrium(tmp_path):
+    """dc = 0: G held at the switch's own value, from rest, the switch an exact equilibrium of
+    the discrete system (its static Newton residual kept as a load): nothing moves, E_c = 0 at
+    every step, and the rule calls it an equilibrium (docs/burst.md), below and at the peak."""
+    out = tmp_path / "dc0"
+    assert fcli.main(["burst", *SMALL, "--dc", "0", "--quiet", "--no-fields", "--out", str(out)]) == 0
+    rows = _rows(out / "burst.csv")
+    assert [r["outcome"] for r in rows] == ["equilibrium", "equilibrium"]
+    assert all(float(h["ke"]) == 0.0 for h in _rows(out / "history.csv"))
+
+
 def test_config_validate_names_the_option():
     with pytest.raises(ValueError, match="--ratios"):
         BurstConfig(ratios=(0.0,)).validate()

@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 
 from hmodel.burst_rule import BurstRule, ke_growth
-from hmodel.io import atomic_write_bytes
+from hmodel.io import atomic_write_bytes, save_figure
 from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
@@ -469,18 +469,17 @@ def _frame(fields, prob, tie, u_ref, t, m, ratio):
 
 def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
     """ke.png, balance.png, path.png and mode_*.png (see docs/fem.md)."""
-    import io
-
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    def save(fig, name):
-        buf = io.BytesIO()
-        fig.tight_layout()
-        fig.savefig(buf, format="png", dpi=120)
-        plt.close(fig)
-        atomic_write_bytes(out / name, buf.getvalue())
+    def finish(fig, ax, xlabel, ylabel, title, name):
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title, fontsize=8)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+        save_figure(fig, out / name, dpi=120)
 
     starts = sorted({(tag["ratio"], tag["start_fraction"]) for tag, _ in runs})
     color = {s: f"C{i % 10}" for i, s in enumerate(starts)}
@@ -502,13 +501,10 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
                           r"$W_{2,int} \geq 0$)" if (tag, res) == runs[0] else None)
     if not any(np.any(res.history["ke"] > 0) for _, res in runs):
         ax.set_yscale("linear")                       # dc = 0: nothing moved, E_c = 0
-    ax.set_xlabel("time since the switch t [ms]")
-    ax.set_ylabel(r"kinetic energy $E_c$ [J/m] (per unit thickness)")
-    ax.set_title("G held at G_switch + dG: kinetic energy (x: failure, o: equilibrium / "
-                 "undecided, by hmodel.burst_rule); dotted: the work of dG", fontsize=8)
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
-    save(fig, "ke.png")
+    finish(fig, ax, "time since the switch t [ms]",
+           r"kinetic energy $E_c$ [J/m] (per unit thickness)",
+           "G held at G_switch + dG: kinetic energy (x: failure, o: equilibrium / undecided, by "
+           "hmodel.burst_rule); dotted: the work of dG", "ke.png")
     # the energy balance residual per step
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     for tag, res in runs:
@@ -519,14 +515,11 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
                     style[tag["switch"]], color=color[s], lw=1,
                     label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}")
     ax.axhline(1e-6, color="k", lw=0.8, ls=":", label="1e-6")
-    ax.set_xlabel("time step since the switch")
-    ax.set_ylabel(r"$|\Delta E_c - (\Delta W_{ext} - \Delta W_{int} - \Delta D)|$ / "
-                  r"max($E_c$, |$W_2$|, D) [-]")
-    ax.set_title("discrete energy balance of each step (Newmark average acceleration: exact up "
-                 "to the Newton tolerance)", fontsize=8)
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
-    save(fig, "balance.png")
+    finish(fig, ax, "time step since the switch",
+           r"$|\Delta E_c - (\Delta W_{ext} - \Delta W_{int} - \Delta D)|$ / "
+           r"max($E_c$, |$W_2$|, D) [-]",
+           "discrete energy balance of each step (Newmark average acceleration: exact up to the "
+           "Newton tolerance)", "balance.png")
     # c against eps1, FE and material point, peaks and switches marked
     fig, ax = plt.subplots(figsize=(7.5, 5))
     for s in starts:
@@ -547,13 +540,10 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
         k = fe["below"]
         ax.plot(100 * fe["eps1"][k], fe["c"][k] / 1e3, "v", ms=9, color=color[s], mfc="none",
                 label=f"below switch (95 % of the rise), eta = {fe['eta'][k]:.4f}")
-    ax.set_xlabel(r"axial strain $\varepsilon_1$ [%] (compression +)")
-    ax.set_ylabel(r"$c = \sigma_1 + R\,\sigma_2$ [kPa]")
-    ax.set_title(f"proportional strain paths from the drained path (material point drained peak "
-                 f"eta {mp_curve['eta_peak']:.4f})", fontsize=8)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    save(fig, "path.png")
+    finish(fig, ax, r"axial strain $\varepsilon_1$ [%] (compression +)",
+           r"$c = \sigma_1 + R\,\sigma_2$ [kPa]",
+           f"proportional strain paths from the drained path (material point drained peak eta "
+           f"{mp_curve['eta_peak']:.4f})", "path.png")
     # the collapse mode of each failure run
     for tag, res in runs:
         if res.outcome == "failure" and np.any(res.v):

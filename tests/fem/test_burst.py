@@ -183,3 +183,22 @@ def test_sigterm_is_one_line_and_exit_143(tmp_path):
     assert len(paths) > 10 and all(len(r) == len(PATH_COLUMNS) for r in paths)
     with open(out / "burst.csv") as f:
         assert f.readline().strip().split(",") == BURST_COLUMNS
+
+
+@pytest.mark.slow
+def test_bit_identical_for_any_thread_count(tmp_path):
+    """4 x 8 quads (128 points: the material's parallel kernel) run with 1 and 2 Numba threads:
+    history.csv and paths.csv the same bytes."""
+    import os
+    import subprocess
+    import sys
+    outs = []
+    for n in ("1", "2"):
+        out = tmp_path / f"t{n}"
+        env = dict(os.environ, NUMBA_NUM_THREADS=n)
+        subprocess.run([sys.executable, "-m", "fem", "burst", "--nx", "4", "--ny", "8", "--n-dir",
+                        "36", "--no-fields", "--quiet", "--out", str(out)], check=True, env=env,
+                       capture_output=True, timeout=600)
+        outs.append(out)
+    for f in ("history.csv", "paths.csv"):
+        assert (outs[0] / f).read_bytes() == (outs[1] / f).read_bytes(), f

@@ -120,7 +120,8 @@ class BurstConfig:
                 "an integer >= 10 (dt = T1 / steps must resolve the lowest period T1)")
         if not (math.isfinite(self.path_strain) and 0 < self.path_strain < 0.5):
             bad("--path-strain", self.path_strain, "0 < path strain < 0.5")
-        if not (math.isfinite(self.path_d_eps1) and 0 < self.path_d_eps1 < min(0.05, self.path_strain)):
+        if not (math.isfinite(self.path_d_eps1)
+                and 0 < self.path_d_eps1 < min(0.05, self.path_strain)):
             bad("--path-d-eps1", self.path_d_eps1, "0 < step < min(0.05, --path-strain)")
         self.rule.validate("rule.")
         return self
@@ -149,8 +150,9 @@ def _averages(prob, sigma, u, ratio=None) -> dict:
     s = stress_to_model(sigma)
     e = strain_to_model(prob.strain(u))
     s1, s2 = float(prob.volume_average(s[0, 0])), float(prob.volume_average(s[1, 1]))
-    row = {"eps1": float(prob.volume_average(e[0, 0])), "eps2": float(prob.volume_average(e[1, 1])),
-           "s1": s1, "s2": s2, "p": 0.5 * (s1 + s2), "q": s1 - s2, "eta": (s1 - s2) / (0.5 * (s1 + s2))}
+    row = {"eps1": float(prob.volume_average(e[0, 0])),
+           "eps2": float(prob.volume_average(e[1, 1])), "s1": s1, "s2": s2, "p": 0.5 * (s1 + s2),
+           "q": s1 - s2, "eta": (s1 - s2) / (0.5 * (s1 + s2))}
     if ratio is not None:
         row["c"] = s1 + ratio * s2
     return row
@@ -212,7 +214,8 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
     hist_w = path_w = burst_w = fields = None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        hist_w = CurveWriter(out / "history.csv", ["ratio", "start_fraction", "switch"] + HISTORY_COLUMNS)
+        hist_w = CurveWriter(out / "history.csv",
+                             ["ratio", "start_fraction", "switch"] + HISTORY_COLUMNS)
         path_w = CurveWriter(out / "paths.csv", PATH_COLUMNS)
         burst_w = CurveWriter(out / "burst.csv", BURST_COLUMNS)
     rows, paths, runs = [], {}, []
@@ -277,10 +280,11 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                 base["c_peak_error"] = base["c_peak"] / base["mp_c_peak"] - 1
                 base["eta_peak_error"] = base["eta_peak_c"] / base["mp_eta_peak_c"] - 1
                 if peak is not None:
-                    say(f"path R = {R:g}, f = {f:g}: c peak {base['c_peak'] / 1e3:.3f} kPa at eta "
-                        f"{base['eta_peak_c']:.4f} (material point {base['mp_c_peak'] / 1e3:.3f} kPa"
-                        f" at eta {base['mp_eta_peak_c']:.4f}: {100 * base['c_peak_error']:+.3f} %, "
-                        f"{100 * base['eta_peak_error']:+.3f} %)")
+                    b = base
+                    say(f"path R = {R:g}, f = {f:g}: c peak {b['c_peak'] / 1e3:.3f} kPa at eta "
+                        f"{b['eta_peak_c']:.4f} (material point {b['mp_c_peak'] / 1e3:.3f} kPa at "
+                        f"eta {b['mp_eta_peak_c']:.4f}: {100 * b['c_peak_error']:+.3f} %, "
+                        f"{100 * b['eta_peak_error']:+.3f} %)")
                 else:
                     say(f"path R = {R:g}, f = {f:g}: c does not peak within the path strain "
                         f"{cfg.path_strain}: one below run at its end")
@@ -294,12 +298,9 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                         fields_run = tag
                         frames = fields
                     res, t1 = _held_run(prob, M, snap, float(R), B * dc, cfg, rule, tag, say,
-                                        frames)
+                                        hist_w, frames)
                     timings["dynamics"] += time.perf_counter() - t0
                     h = res.history
-                    if hist_w is not None:
-                        for k in range(len(h["t"])):
-                            hist_w.write(dict(tag, **{c: h[c][k] for c in HISTORY_COLUMNS}))
                     share, area, nonuniform = (_mode_measures(prob, float(R), res.v)
                                                if res.outcome == "failure" else (math.nan,) * 3)
                     row = dict(base, switch=name, c_switch=snap.row["c"], outcome=res.outcome,
@@ -421,9 +422,11 @@ def _frame_every(cfg: BurstConfig) -> int:
 
 
 def _held_run(prob, M, snap: Snapshot, ratio: float, dG: float, cfg: BurstConfig, rule, tag,
-              say, fields):
+              say, history, fields):
     """From the switch state ``snap`` at rest: its lowest elastic period T1 (sliding prevented,
-    U1 free), then ``hold`` at G_switch + dG. Returns (HoldResult, T1)."""
+    U1 free), then ``hold`` at G_switch + dG, each step written to ``history`` (a CurveWriter
+    or None) as it converges, four frames a period to ``fields`` (FieldWriter or None).
+    Returns (HoldResult, T1)."""
     _restore(prob, snap)
     tie = Tie(prob, ratio)
     elastic = prob.material.trial(np.zeros((2, 2, prob.npts)), elastic=True)
@@ -433,10 +436,12 @@ def _held_run(prob, M, snap: Snapshot, ratio: float, dG: float, cfg: BurstConfig
     report = max(1, 2 * cfg.steps_per_period)
     t0 = time.perf_counter()
 
-    def on_step(k, m, system):
+    def on_step(k, m, system, row):
+        if history is not None:
+            history.write(dict(tag, **row))
         if fields is not None and k % every == 0:
             _frame(fields, prob, tie, snap.u, k * (t1 / cfg.steps_per_period), m, ratio)
-        if k % report == 0:
+        if k and k % report == 0:
             u1 = float(m.z[-1])
             ke = 0.5 * float(m.v @ (system.M @ m.v))
             say(f"{_label(tag)}: step {k} t = {k / cfg.steps_per_period:.1f} T1 E_c = {ke:.3e} J/m "
@@ -547,6 +552,7 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
     # the collapse mode of each failure run
     for tag, res in runs:
         if res.outcome == "failure" and np.any(res.v):
-            plot_mode(out / f"mode_R{tag['ratio']:g}_f{tag['start_fraction']:g}_{tag['switch']}.png",
-                      prob, res.v, title=(f"collapse mode (velocity at the end), {_label(tag)}, "
-                                          f"t = {1e3 * res.history['t'][-1]:.3f} ms"))
+            name = f"mode_R{tag['ratio']:g}_f{tag['start_fraction']:g}_{tag['switch']}.png"
+            plot_mode(out / name, prob, res.v,
+                      title=(f"collapse mode (velocity at the end), {_label(tag)}, "
+                             f"t = {1e3 * res.history['t'][-1]:.3f} ms"))

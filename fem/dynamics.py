@@ -176,8 +176,9 @@ class Motion(NamedTuple):
 class TiedDynamics:
     """The reduced system of the tied specimen from a committed state (the switch) with
     displacement ``u_ref``: mass M = T^T M T, mass-proportional damping C = ``alpha`` M
-    (alpha = 2 zeta omega_1 [1/s]), the external force (0, ..., G_switch + ``dG``) with G_switch
-    the generalized force of the committed state (``start``), the internal force at reduced
+    (alpha = 2 zeta omega_1 [1/s]), the external force f(0) + (0, ..., ``dG``) with f(0) the
+    reduced internal force of the committed state (``start``; G_switch its last entry, the
+    generalized force), the internal force at reduced
     coordinates z from the committed material state (``force``) and Newton's linear solve with
     its tangent (``solve``)."""
 
@@ -220,7 +221,8 @@ class TiedDynamics:
         pattern (a sum by scipy drops the entries that cancel, and a new pattern costs the
         linear solver its kept column order)."""
         key = self._mass_key
-        if key is None or not (np.array_equal(key[0], K.indptr) and np.array_equal(key[1], K.indices)):
+        if key is None or not (np.array_equal(key[0], K.indptr)
+                               and np.array_equal(key[1], K.indices)):
             rows = np.repeat(np.arange(K.shape[0]), np.diff(K.indptr))
             mk = np.asarray(self.mass[rows, K.indices]).ravel()
             if not math.isclose(float(abs(mk).sum()), float(abs(self.mass).sum()), rel_tol=1e-12):
@@ -339,9 +341,10 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
 
     t1 : the lowest elastic period T1 [s] (``lowest_mode``); dt = T1 / steps_per_period; the
     damping C = 2 zeta (2 pi / T1) M, zeta = ``damping_ratio``. eps_ref : (eps1, eps2) of the
-    switch (compression positive) for the recorded strains. ``on_step(step, motion, system)``
-    after each recorded step (e.g. to write fields). The material state is committed step by
-    step (the specimen ends in the run's last state).
+    switch (compression positive) for the recorded strains. ``on_step(step, motion, system,
+    row)`` at the switch (step 0) and after each step, ``row`` the step's history (a dict of
+    HISTORY_COLUMNS), e.g. to write it and the fields as the run goes. The material state is
+    committed step by step (the specimen ends in the run's last state).
 
     Every step records (HISTORY_COLUMNS): t [s]; eps1, eps2; c = G/B [Pa]; G = a . f_int [N/m];
     U1 [m]; ke = v.M v/2; w_ext, w_int, damping: the trapezoidal work of f_ext, f_int and C v
@@ -357,7 +360,8 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
         raise ValueError(f"steps_per_period = {steps_per_period!r} is out of range: allowed an "
                          "integer >= 10 (a time step must resolve the lowest period)")
     if not (math.isfinite(damping_ratio) and 0 <= damping_ratio < 1):
-        raise ValueError(f"damping_ratio = {damping_ratio!r} is out of range: allowed 0 <= zeta < 1")
+        raise ValueError(f"damping_ratio = {damping_ratio!r} is out of range: allowed "
+                         "0 <= zeta < 1")
     if not (math.isfinite(dG) and dG >= 0):
         raise ValueError(f"dG = {dG!r} is out of range: allowed dG >= 0 [N/m]")
     t0 = time.perf_counter()
@@ -385,6 +389,8 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
     scale = 0.0
     outcome = None
     k = 0
+    if on_step is not None:
+        on_step(0, m, system, {key: v[0] for key, v in h.items()})
     while k < n_cap:
         m1, trial, iters, _ = newmark_step(system, m, dt, scheme, rtol, max_iter)
         system.commit(m1.z, trial)
@@ -416,7 +422,7 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
         h["newton_iters"][k] = iters
         m = m1
         if on_step is not None:
-            on_step(k, m, system)
+            on_step(k, m, system, {key: v[k] for key, v in h.items()})
         s = slice(0, k + 1)
         outcome = decide(h["t"][s], h["ke"][s], h["w2_ext"][s], h["eps1"][s], window, rule)
         if outcome is not None:

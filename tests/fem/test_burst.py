@@ -156,7 +156,8 @@ def test_dc_zero_holds_the_switch_equilibrium(tmp_path):
     the discrete system (its static Newton residual kept as a load): nothing moves, E_c = 0 at
     every step, and the rule calls it an equilibrium (docs/burst.md), below and at the peak."""
     out = tmp_path / "dc0"
-    assert fcli.main(["burst", *SMALL, "--dc", "0", "--quiet", "--no-fields", "--out", str(out)]) == 0
+    argv = ["burst", *SMALL, "--dc", "0", "--quiet", "--no-fields", "--out", str(out)]
+    assert fcli.main(argv) == 0
     rows = _rows(out / "burst.csv")
     assert [r["outcome"] for r in rows] == ["equilibrium", "equilibrium"]
     assert all(float(h["ke"]) == 0.0 for h in _rows(out / "history.csv"))
@@ -181,6 +182,10 @@ def test_sigterm_is_one_line_and_exit_143(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("interrupted (SIGTERM) during R = -2"), lines
     paths = _rows(out / "paths.csv")
     assert len(paths) > 10 and all(len(r) == len(PATH_COLUMNS) for r in paths)
+    hist = _rows(out / "history.csv")       # the interrupted run's steps so far, whole rows
+    assert len(hist) > 40 and all(len(r) == 3 + len(HISTORY_COLUMNS) and r["newton_iters"]
+                                  for r in hist)
+    assert [int(r["step"]) for r in hist] == list(range(len(hist)))
     with open(out / "burst.csv") as f:
         assert f.readline().strip().split(",") == BURST_COLUMNS
 

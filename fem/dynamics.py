@@ -389,8 +389,13 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
     scale = 0.0
     outcome = None
     k = 0
+
+    def row(k):
+        return {key: int(v[k]) if key in ("step", "newton_iters") else float(v[k])
+                for key, v in h.items()}
+
     if on_step is not None:
-        on_step(0, m, system, {key: v[0] for key, v in h.items()})
+        on_step(0, m, system, row(0))
     while k < n_cap:
         m1, trial, iters, _ = newmark_step(system, m, dt, scheme, rtol, max_iter)
         system.commit(m1.z, trial)
@@ -422,7 +427,7 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
         h["newton_iters"][k] = iters
         m = m1
         if on_step is not None:
-            on_step(k, m, system, {key: v[k] for key, v in h.items()})
+            on_step(k, m, system, row(k))
         s = slice(0, k + 1)
         outcome = decide(h["t"][s], h["ke"][s], h["w2_ext"][s], h["eps1"][s], window, rule)
         if outcome is not None:

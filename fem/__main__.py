@@ -3,6 +3,7 @@ fem.biaxial.run_biaxial)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 
@@ -13,6 +14,7 @@ from hmodel.experiment import compile_kernels
 from hmodel.params import ParamError
 
 from .biaxial import BiaxialConfig, run_biaxial, format_summary
+from .burst import BurstConfig, run_burst
 
 # Numba's OpenMP threads spin-wait after each parallel region of the material update (libgomp's
 # default, ~5 ms with this CPU's slow `pause`), on the core where the run's global check then
@@ -35,26 +37,25 @@ def _opt_float(s):
     return None if s.lower() == "none" else opt.real()(s)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    d = BiaxialConfig()
+def _specimen_options(sub, d: BiaxialConfig, eps1_max: bool):
+    """The options both commands share: mesh, loading (``--eps1-max`` with ``eps1_max``),
+    material, imperfection, and the Newton options in the group "solver and output", which is
+    returned for the command's own output options."""
     R = opt.real
-    ap = opt.Parser(prog="python -m fem", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    b = sub.add_parser("biaxial", help="plane-strain FE biaxial test with bifurcation checks")
-    b.add_argument("--out", required=True, help="output directory")
-    g = b.add_argument_group("mesh")
+    g = sub.add_argument_group("mesh")
     g.add_argument("--nx", type=opt.integer(1), default=d.nx, help="cells across the width (default %(default)s)")
     g.add_argument("--ny", type=opt.integer(1), default=d.ny, help="cells along the height (default %(default)s)")
     g.add_argument("--width", type=R(0, unit="m"), default=d.width, help="B [m] (default %(default)s)")
     g.add_argument("--height", type=R(0, unit="m"), default=d.height, help="H [m] (default %(default)s)")
     g.add_argument("--mesh", dest="mesh_kind", choices=["quad", "tri"], default=d.mesh_kind)
     g.add_argument("--mesh-file", default=None, help="meshio-readable triangle/quad mesh (overrides --nx ...)")
-    g = b.add_argument_group("loading")
-    g.add_argument("--eps1-max", type=R(0, 0.5), default=d.eps1_max, help="final axial strain (default %(default)s)")
+    g = sub.add_argument_group("loading")
+    if eps1_max:
+        g.add_argument("--eps1-max", type=R(0, 0.5), default=d.eps1_max, help="final axial strain (default %(default)s)")
     g.add_argument("--d-eps1", type=R(0, 0.05), default=d.d_eps1, help="axial strain step (default %(default)s)")
     g.add_argument("--sigma2", type=R(0, unit="Pa"), default=d.sigma2,
                    help="confining pressure = p0 [Pa] (default %(default)s)")
-    g = b.add_argument_group("material (Table I defaults)")
+    g = sub.add_argument_group("material (Table I defaults)")
     g.add_argument("--kn", type=float, default=d.kn)
     g.add_argument("--kt", type=float, default=d.kt)
     g.add_argument("--phi-g", type=float, default=d.phi_g)
@@ -63,22 +64,72 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--thickness", type=float, default=None,
                    help="hexagon slab thickness h [m] of the material (default 2 r_g)")
     g.add_argument("--n-dir", type=int, default=d.n_dir)
-    g = b.add_argument_group("imperfection")
+    g = sub.add_argument_group("imperfection")
     g.add_argument("--imperfection", choices=["none", "spot", "band"], default="none")
     g.add_argument("--imp-size", type=R(0, 1, hi_open=False), default=d.imp_size,
                    help="fraction of the width, 0 < size <= 1 (spot radius, band half-width)")
     g.add_argument("--imp-phi-g", type=_opt_float, default=d.imp_phi_g, help="weak phi_g [deg] or none")
     g.add_argument("--imp-alpha0", type=_opt_float, default=d.imp_alpha0, help="weak alpha0 [deg] or none")
     g.add_argument("--imp-angle", type=R(unit="deg"), default=d.imp_angle, help="band angle [deg]")
-    g = b.add_argument_group("solver and output")
+    g = sub.add_argument_group("solver and output")
     g.add_argument("--rtol", type=R(0, 1), default=d.rtol)
     g.add_argument("--max-iter", type=opt.integer(1), default=d.max_iter)
     g.add_argument("--max-cutbacks", type=opt.integer(0), default=d.max_cutbacks)
+    return g
+
+
+def build_parser() -> argparse.ArgumentParser:
+    d = BiaxialConfig()
+    ap = opt.Parser(prog="python -m fem", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    b = sub.add_parser("biaxial", help="plane-strain FE biaxial test with bifurcation checks")
+    b.add_argument("--out", required=True, help="output directory")
+    g = _specimen_options(b, d, eps1_max=True)
     g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
     g.add_argument("--n-sphere", type=opt.integer(1), default=d.n_sphere,
                    help="strain directions sampled for the local min of W2 (default %(default)s)")
     g.add_argument("--quiet", action="store_true")
+    _burst_parser(sub)
     return ap
+
+
+def _burst_parser(sub):
+    """``python -m fem burst``: the options of docs/burst.md beside the specimen's."""
+    c = BurstConfig()
+    R = opt.real
+    b = sub.add_parser("burst", help="the burst of kinetic energy: proportional strain paths, "
+                       "then the conjugate force held (docs/burst.md)",
+                       description="From the drained FE path, the proportional strain path d eps2 "
+                       "= R d eps1 under the tie (platens on the four faces), then G held at "
+                       "G_switch + dG just below and just past the c peak, in dynamics (Newmark "
+                       "average acceleration); outcome by hmodel.burst_rule. See docs/burst.md "
+                       "and docs/fem.md.")
+    b.add_argument("--out", required=True, help="output directory")
+    g = b.add_argument_group("burst")
+    g.add_argument("--ratios", type=opt.reals(), default=list(c.ratios),
+                   help="R of the paths d eps2 = R d eps1, comma-separated, each finite and < 0 "
+                        f"(default {','.join(f'{r:g}' for r in c.ratios)})")
+    g.add_argument("--start-fractions", type=opt.reals(0, 1), default=list(c.start_fractions),
+                   help="start states at these fractions of the material point's drained peak "
+                        "eta, 0 < f < 1 (default "
+                        f"{','.join(f'{f:g}' for f in c.start_fractions)})")
+    g.add_argument("--dc", type=R(0, lo_open=False, unit="Pa"), default=None,
+                   help="held step of c [Pa] >= 0, dG = B dc (default 1e-4 x sigma2)")
+    g.add_argument("--density", type=R(0, unit="kg/m^3"), default=c.density,
+                   help="bulk density [kg/m^3] > 0 (default %(default)s)")
+    g.add_argument("--damping-ratio", type=R(0, 1, lo_open=False), default=c.damping_ratio,
+                   help="zeta of the mass-proportional damping at the lowest elastic mode, "
+                        "0 <= zeta < 1 (default %(default)s)")
+    g.add_argument("--steps-per-period", type=opt.integer(10), default=c.steps_per_period,
+                   help="time steps per lowest elastic period T1, >= 10 (default %(default)s)")
+    g.add_argument("--path-strain", type=R(0, 0.5), default=c.path_strain,
+                   help="largest axial strain of a path from its start (default %(default)s)")
+    g.add_argument("--path-d-eps1", type=R(0, 0.05), default=c.path_d_eps1,
+                   help="axial strain step of the proportional paths (default %(default)s; "
+                        "--d-eps1 is the drained path's)")
+    g = _specimen_options(b, c.specimen, eps1_max=False)
+    g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
+    g.add_argument("--quiet", action="store_true")
 
 
 def check_config(cfg: BiaxialConfig) -> None:
@@ -112,13 +163,26 @@ def check_config(cfg: BiaxialConfig) -> None:
                      f"fewer cells or orientations ({options})")
 
 
-def _warm_indicators():
-    """Compile fem's own kernels on tiny cases: the local indicators on one elastic point, the
-    adapter's flag counts (and hmodel's update kernel through it, both drivers) on 70 and 4
-    points of 8 orientations, the stiffness on one element, the global check's banded kernels
-    on 2 x 4 elements."""
+def _warm_specimen():
+    """Compile the specimen's kernels on tiny cases: the adapter's flag counts (and hmodel's
+    update kernel through it, both drivers) on 70 and 4 points of 8 orientations, the stiffness
+    on one element."""
     from hmodel import HParams
     from .adapter import MaterialField
+    from .mesh import rectangle
+    from .problem import Biaxial
+    p = HParams(n_dir=8)
+    for n in (70, 4):
+        mf = MaterialField(n, [(p, np.arange(n))])
+        t = mf.trial(np.zeros((2, 2, n)))
+        mf.pattern_changes(t, t)
+    Biaxial(rectangle(1.0, 1.0, 1, 1), p).stiffness(t.D)       # 1 quad: the 4 points of t
+
+
+def _warm_indicators():
+    """Compile fem's own kernels on tiny cases: the specimen's (``_warm_specimen``), the local
+    indicators on one elastic point, the global check's banded kernels on 2 x 4 elements."""
+    from hmodel import HParams
     from .indicators import GlobalCheck, local_indicators
     from .mesh import rectangle
     from .problem import Biaxial
@@ -126,35 +190,40 @@ def _warm_indicators():
     D = (np.einsum("ij,kl->ijkl", I, I) + np.einsum("ik,jl->ijkl", I, I)
          + np.einsum("il,jk->ijkl", I, I))[..., None] * 1e6
     local_indicators(D, n_sphere=8)
-    p = HParams(n_dir=8)
-    for n in (70, 4):
-        mf = MaterialField(n, [(p, np.arange(n))])
-        t = mf.trial(np.zeros((2, 2, n)))
-        mf.pattern_changes(t, t)
-    Biaxial(rectangle(1.0, 1.0, 1, 1), p).stiffness(D[..., [0] * 4])
-    b = Biaxial(rectangle(1.0, 2.0, 2, 4), p)
+    _warm_specimen()
+    b = Biaxial(rectangle(1.0, 2.0, 2, 4), HParams(n_dir=8))
     GlobalCheck(b)(b.stiffness(D[..., [0] * b.npts]))
 
 
-def _fem_kernels():
+def _fem_kernels(indicators: bool = True):
+    """fem's Numba kernels: the adapter's and the problem's, and with ``indicators`` the
+    bifurcation checks' (which ``fem burst`` does not use)."""
     import numba
 
-    from . import adapter, indicators, problem
-    return [v for m in (indicators, adapter, problem) for v in vars(m).values()
+    from . import adapter, indicators as ind, problem
+    mods = (ind, adapter, problem) if indicators else (adapter, problem)
+    return [v for m in mods for v in vars(m).values()
             if isinstance(v, numba.core.registry.CPUDispatcher)]
 
 
 def main(argv=None) -> int:
-    """``python -m fem biaxial ...``: 0 done, 1 a step failed (converged steps kept), 2 bad
+    """``python -m fem biaxial|burst ...``: 0 done, 1 a step failed (converged steps kept), 2 bad
     option (one line, nothing written), 130 / 143 interrupted."""
     return opt.run_cli(build_parser(), argv, _run)
 
 
-def _run(args, stage) -> int:
-    kw = {k: v for k, v in vars(args).items() if k not in ("cmd", "out", "quiet")}
+def _specimen_config(args) -> BiaxialConfig:
+    names = {f.name for f in dataclasses.fields(BiaxialConfig)}
+    kw = {k: v for k, v in vars(args).items() if k in names}
     if kw["imperfection"] == "none":
         kw["imperfection"] = None
-    cfg = BiaxialConfig(**kw)
+    return BiaxialConfig(**kw)
+
+
+def _run(args, stage) -> int:
+    if args.cmd == "burst":
+        return _run_burst(args, stage)
+    cfg = _specimen_config(args)
     check_config(cfg)
     opt.check_out_dir(args.out)
     compile_kernels(extra=_fem_kernels(), warm=_warm_indicators)
@@ -183,6 +252,57 @@ def _run(args, stage) -> int:
           f"(update {t['update']:.1f} s, assembly {t['assembly']:.1f} s, solve {t['solve']:.1f} s, "
           f"indicators + output {t['indicators_output']:.1f} s); outputs in {args.out}")
     return 0
+
+
+def _run_burst(args, stage) -> int:
+    """``python -m fem burst``: every option checked (one line, exit 2, nothing written), the
+    kernels compiled, then ``run_burst`` with progress on stderr and the table of the runs on
+    stdout."""
+    spec = dataclasses.replace(_specimen_config(args), fields=args.fields)
+    cfg = BurstConfig(specimen=spec, ratios=tuple(args.ratios),
+                      start_fractions=tuple(args.start_fractions), dc=args.dc,
+                      density=args.density, damping_ratio=args.damping_ratio,
+                      steps_per_period=args.steps_per_period, path_strain=args.path_strain,
+                      path_d_eps1=args.path_d_eps1, fields=args.fields)
+    cfg.validate()
+    check_config(spec)
+    opt.check_out_dir(args.out)
+    compile_kernels(extra=_fem_kernels(indicators=False), warm=_warm_specimen)
+
+    def progress(line):
+        if not stage.written and line.startswith("drained path: start"):
+            stage.wrote("paths.csv, history.csv and burst.csv up to the last finished row")
+        stage.at(line.split(":")[0])
+        if not args.quiet:
+            print(line, file=sys.stderr, flush=True)
+
+    stage.at("set-up of the specimen")
+    try:
+        res = run_burst(cfg, args.out, progress=progress)
+    except RuntimeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    print(format_burst(res.rows))
+    t = res.summary["timings"]
+    print(f"{len(res.rows)} runs, {t['total']:.1f} s total (drained path {t['drained']:.1f} s, "
+          f"proportional paths {t['paths']:.1f} s, material point {t['material_point']:.1f} s, "
+          f"dynamics {t['dynamics']:.1f} s, figures {t.get('figures', 0.0):.1f} s); outputs in "
+          f"{args.out}")
+    return 0
+
+
+def format_burst(rows) -> str:
+    """The table of the runs: the c peak (FE, material point), the switch and the outcome."""
+    lines = ["    R      f  switch  eta_switch  c_switch [kPa]  c_peak FE / MP [kPa]  "
+             "eta_peak FE / MP   outcome      E_c growth  t_end/T1  balance"]
+    for r in rows:
+        lines.append(f"{r['ratio']:5g} {r['start_fraction']:6g}  {r['switch']:6s}  "
+                     f"{r['eta_switch']:10.4f}  {r['c_switch'] / 1e3:14.3f}  "
+                     f"{r['c_peak'] / 1e3:9.3f} / {r['mp_c_peak'] / 1e3:9.3f}  "
+                     f"{r['eta_peak_c']:7.4f} / {r['mp_eta_peak_c']:7.4f}  {r['outcome']:11s}  "
+                     f"{r['ke_growth']:10.3g}  {r['t_end'] / r['t1']:8.1f}  "
+                     f"{r['energy_residual']:.1e}")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -158,10 +158,11 @@ class MaterialField:
             out[:, :, idx] = stress_to_fe(st.stress)
         return out
 
-    def trial(self, d_eps_fe: np.ndarray) -> Trial:
+    def trial(self, d_eps_fe: np.ndarray, elastic: bool = False) -> Trial:
         """Update every point from the committed state by the FE strain increment
         ``d_eps_fe`` (2, 2, npts) (the total increment of the load step: the sliding pattern of
-        the H-model is decided by the increment from the committed state).
+        the H-model is decided by the increment from the committed state). ``elastic``: with
+        sliding prevented (the elastic tangent of the state, e.g. for its lowest period).
 
         The same update as ``hmodel.update_full(state, d_eps, params, extras=False)`` (same
         checks, the same bits), by hmodel's kernel called here directly; the FE stress and tangent
@@ -182,7 +183,7 @@ class MaterialField:
         states = []
         for g, ((params, idx), st) in enumerate(zip(self.groups, self.states)):
             de = to_voigt(de_m if one else de_m[:, :, idx])
-            ns, sig, tan = self._update(g, params, st, de)
+            ns, sig, tan = self._update(g, params, st, de, self.allow_sliding and not elastic)
             if one:
                 _stress_fe_from_kernel(sig, sigma)
                 D = _tangent_fe_from_kernel(tan)
@@ -196,7 +197,7 @@ class MaterialField:
             states.append(ns)
         return Trial(sigma, D, states, sliding, opened)
 
-    def _update(self, g: int, params: HParams, st: HState, de: np.ndarray):
+    def _update(self, g: int, params: HParams, st: HState, de: np.ndarray, allow_sliding: bool):
         """(new state, kernel stress (n, 3), kernel tangent (n, 3, 3)) of group ``g`` for the
         material strain increment ``de`` (n, 3) (11, 22, 12): hmodel.update_full's steps."""
         check_state(st, params)
@@ -204,7 +205,7 @@ class MaterialField:
         npts, ndir = args[0].shape
         out = _kernels.allocate_outputs(npts, ndir)
         kern = _kernels.update_parallel if npts >= PARALLEL_MIN_POINTS else _kernels.update_serial
-        kern(*args[:-1], de, *_material_args(params), self.allow_sliding, False, *out)
+        kern(*args[:-1], de, *_material_args(params), allow_sliding, False, *out)
         sig, tan = out[12], out[13]
         if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
             _refuse_non_finite(st)

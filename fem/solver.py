@@ -72,6 +72,7 @@ class FreeSolver:
         self._ordered = None        # (pattern (indptr, indices), PatternGather, inverse order)
 
     def solve(self, K, b: np.ndarray) -> np.ndarray:
+        """K[free][:, free]^{-1} b, b (n_free,) or (n_free, k) (k right-hand sides, one LU)."""
         with warnings.catch_warnings():
             warnings.simplefilter("error", spla.MatrixRankWarning)
             try:
@@ -79,7 +80,7 @@ class FreeSolver:
                 if o is not None and np.array_equal(o[0][0], K.indptr) \
                         and np.array_equal(o[0][1], K.indices):
                     lu = spla.splu(o[1](K), permc_spec="NATURAL")
-                    if np.array_equal(lu.perm_c, np.arange(b.size)):
+                    if np.array_equal(lu.perm_c, np.arange(b.shape[0])):
                         x = np.empty_like(b)
                         x[o[2]] = lu.solve(b)
                         return x
@@ -150,11 +151,14 @@ class LoadStepper:
     d_eps1 : nominal axial strain increment per step (> 0, compression); a failed step is retried
     with half the increment, up to ``max_cutbacks`` halvings in a row; after a success the
     increment grows back (x2) towards the nominal one. ``on_step(result, info)`` is called after
-    each converged (and committed) step.
+    each converged (and committed) step. ``u0`` : (ndofs,) the displacement [m] of the committed
+    state the steps start from (default zeros: the initial state); ``du0`` : (ndofs,) the
+    displacement per unit platen displacement the first step's predictor extrapolates (default
+    none: the first guess moves the prescribed dofs only).
     """
 
     def __init__(self, prob: Biaxial, d_eps1: float, rtol: float = 1e-10, max_iter: int = 25,
-                 max_cutbacks: int = 6, log=None):
+                 max_cutbacks: int = 6, log=None, u0=None, du0=None):
         if not (np.isfinite(d_eps1) and 0 < d_eps1 < 0.05):
             raise ValueError(f"d_eps1 = {d_eps1!r} is out of range: allowed 0 < d_eps1 < 0.05")
         if not (np.isfinite(rtol) and 0 < rtol < 1):
@@ -167,12 +171,12 @@ class LoadStepper:
         self.d_eps1 = float(d_eps1)
         self.rtol, self.max_iter, self.max_cutbacks = float(rtol), int(max_iter), int(max_cutbacks)
         self.log = log
-        self.u = np.zeros(prob.ndofs)
+        self.u = np.zeros(prob.ndofs) if u0 is None else np.array(u0, dtype=float)
         self.delta = 0.0
         self.step = 0
         self.f_int = prob.internal_force(prob.material.stress())
-        self._du_last = None
-        self._h_last = None
+        self._du_last = None if du0 is None else np.array(du0, dtype=float)
+        self._h_last = None if du0 is None else 1.0
         self.solver = FreeSolver(prob.free)
         self.times = {"update": 0.0, "assembly": 0.0, "solve": 0.0, "iterations": 0}
 
@@ -222,8 +226,9 @@ class LoadStepper:
         self.times["iterations"] += res.iterations
         return res, h, cut
 
-    def run(self, eps1_max: float, on_step=None):
-        """Steps until eps1 = eps1_max, growing the increment back after cut-backs."""
+    def run(self, eps1_max: float, on_step=None, until=None):
+        """Steps until eps1 = eps1_max, growing the increment back after cut-backs; or, with
+        ``until`` (a callable of no argument), up to the first step after which it is true."""
         if not (np.isfinite(eps1_max) and 0 < eps1_max < 0.5):
             raise ValueError(f"eps1_max = {eps1_max!r} is out of range: allowed 0 < eps1_max < 0.5")
         H = self.prob.height
@@ -238,5 +243,7 @@ class LoadStepper:
                     "df_int": self.f_int - old_f}
             if on_step is not None:
                 on_step(res, info)
+            if until is not None and until():
+                break
             h = min(2.0 * h_done, h_nom) if cut or h_done < h_nom else h_nom
         return self

@@ -29,13 +29,14 @@ class OptionError(ValueError):
 
 class Parser(argparse.ArgumentParser):
     """argparse with one-line errors: raises OptionError instead of printing the usage and
-    exiting (``run_cli`` prints it as ``error: ...`` and returns 2). A value that starts like a
-    negative number is a value, also a comma-separated list (``--ratios -1,-2``; argparse before
-    Python 3.13 takes "-1,-2" for an option): no option of these CLIs starts with a digit."""
+    exiting (``run_cli`` prints it as ``error: ...`` and returns 2). A value that starts with a
+    minus sign and a digit, a point, inf or nan (``--ratios -2,-1``, ``--dc -1e-3``, ``--ratios
+    -inf``) is a value, not an option (argparse takes only plain negative numbers so), so that
+    its type can check it and say what is allowed."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self._negative_number_matcher = re.compile(r"-\.?\d")
+        self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
 
     def error(self, message):
         raise OptionError(f"{message} (see {self.prog} --help)")

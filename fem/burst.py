@@ -1,0 +1,558 @@
+"""The burst of kinetic energy in the FE specimen (docs/burst.md; paper Eq. 1, issue 18).
+
+``run_burst(BurstConfig(...), out_dir)`` is what ``python -m fem burst`` calls:
+
+1. the drained FE path (``LoadStepper``, confining pressure) to each start state: the first
+   converged step with eta >= f x the material point's drained peak eta;
+2. from each start and for each ratio R, the proportional strain path under the tie
+   (``fem.dynamics.Tie``), U1 prescribed in steps of d_eps1 H (static Newton, cut-back), c = G/B
+   recorded until it has peaked (``fem.reference.CPeak``) or the path strain;
+3. from the ``below`` and ``past`` switch states, at rest, G held at G_switch + dG
+   (``fem.dynamics.hold``, Newmark average acceleration, Rayleigh mass damping), the outcome by
+   ``hmodel.burst_rule.decide``;
+4. beside it, the material point on the same path with the same steps
+   (``fem.reference.material_point_path``): the c peak the perfect specimen must reproduce.
+
+Outputs in ``out_dir`` (docs/burst.md, docs/fem.md): burst.csv (a row per run), history.csv
+(every time step of every run), paths.csv (the quasi-static paths, FE and material point),
+fields.xdmf + fields.h5 (the first ``past`` run: displacement, velocity, the mode), ke.png,
+balance.png, path.png, mode_*.png (the collapse mode of each failure run), summary.json.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from hmodel.burst_rule import BurstRule, ke_growth
+from hmodel.io import atomic_write_bytes, save_figure
+from .adapter import stress_to_model, strain_to_model
+from .biaxial import BiaxialConfig, build_problem, _cells
+from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
+from .output import CurveWriter, FieldWriter, cell_tensor, nodal_vector, plot_mode
+from .reference import CPeak, material_point_curve, material_point_path
+from .solver import LoadStepper
+
+__all__ = ["BurstConfig", "run_burst", "BurstResult", "BURST_COLUMNS", "PATH_COLUMNS",
+           "BELOW_FRACTION", "DRAINED_EPS1_MAX"]
+
+# the below switch: the first state where c has risen by this fraction of its rise to the peak
+BELOW_FRACTION = 0.95
+# the drained FE path gives up here if a start state is not reached [-]
+DRAINED_EPS1_MAX = 0.1
+# the material point's drained curve is computed to this axial strain (its peak ~2.1 %) [-]
+MP_EPS1_MAX = 0.05
+
+BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction_peak_c",
+                 "eps1_peak_c", "c_start", "c_peak", "c_switch", "switch", "dc", "outcome",
+                 "ke_growth", "ke_max", "w2_ext_end", "w2_int_end", "t_end", "steps",
+                 "energy_residual", "eq1_residual", "t1", "dt", "eps1_switch", "eta_switch",
+                 "mp_c_peak", "mp_eta_peak_c", "c_peak_error", "eta_peak_error",
+                 "mode_band_share", "band_area_share", "mode_nonuniform", "newton_iters_mean",
+                 "seconds"]
+PATH_COLUMNS = ["ratio", "start_fraction", "source", "step", "eps1", "eps2", "s1", "s2", "p",
+                "q", "eta", "c"]
+
+
+@dataclass
+class BurstConfig:
+    """Every option of ``python -m fem burst`` (SI units, compression positive).
+
+    specimen : the mesh, material, imperfection, d_eps1 (the static steps of both paths) and
+    Newton options, as for ``python -m fem biaxial`` (its eps1_max, n_sphere, fields are not
+    used); ratios : R of the paths (R < 0); start_fractions : f of the start states (0 < f < 1);
+    dc : the held step of c [Pa] (dG = B dc), None: 1e-4 sigma2; density [kg/m^3];
+    damping_ratio : zeta of the mass-proportional damping at the lowest elastic mode;
+    steps_per_period : T1 / dt (>= 10); path_strain : the largest eps1 of a path from its start;
+    path_d_eps1 : the axial strain step of the proportional paths (specimen.d_eps1 is the
+    drained path's);
+    fields : write fields.xdmf; rule : the thresholds of hmodel.burst_rule.decide.
+    """
+
+    specimen: BiaxialConfig = field(default_factory=BiaxialConfig)
+    ratios: tuple = (-2.0,)
+    start_fractions: tuple = (0.90,)
+    dc: float | None = None
+    density: float = DENSITY
+    damping_ratio: float = 0.05
+    steps_per_period: int = 20
+    path_strain: float = 0.03
+    path_d_eps1: float = 1e-5
+    fields: bool = True
+    rule: BurstRule = BurstRule()
+
+    @property
+    def dc_value(self) -> float:
+        """dc [Pa]: the given one, or 1e-4 sigma2 (docs/fem.md: well below what the 95 % switch
+        leaves to the peak, above what a peak sampled in steps of path_d_eps1 can miss)."""
+        return 1e-4 * self.specimen.sigma2 if self.dc is None else float(self.dc)
+
+    def validate(self) -> "BurstConfig":
+        """Every value of this config out of its range raises ValueError naming the option
+        (the CLI's spelling) and the allowed range."""
+        def bad(name, v, allowed):
+            raise ValueError(f"{name} {v!r} is out of range: allowed {allowed}")
+        if not self.ratios:
+            bad("--ratios", self.ratios, "one or more ratios R")
+        for r in self.ratios:
+            if not (isinstance(r, (int, float)) and math.isfinite(r) and r < 0):
+                bad("--ratios", r, "a finite R < 0 (lateral extension; for R >= 0 the "
+                    "specimen is compressed laterally too and c = s1 + R s2 only rises: no peak, "
+                    "no burst)")
+        if not self.start_fractions:
+            bad("--start-fractions", self.start_fractions, "one or more fractions")
+        for f in self.start_fractions:
+            if not (isinstance(f, (int, float)) and math.isfinite(f) and 0 < f < 1):
+                bad("--start-fractions", f, "0 < f < 1 (a fraction of the drained peak eta)")
+        if not (math.isfinite(self.dc_value) and self.dc_value >= 0):
+            bad("--dc", self.dc, "dc >= 0 [Pa]")
+        if not (math.isfinite(self.density) and self.density > 0):
+            bad("--density", self.density, "density > 0 [kg/m^3]")
+        if not (math.isfinite(self.damping_ratio) and 0 <= self.damping_ratio < 1):
+            bad("--damping-ratio", self.damping_ratio, "0 <= zeta < 1")
+        if not (isinstance(self.steps_per_period, int) and self.steps_per_period >= 10):
+            bad("--steps-per-period", self.steps_per_period,
+                "an integer >= 10 (dt = T1 / steps must resolve the lowest period T1)")
+        if not (math.isfinite(self.path_strain) and 0 < self.path_strain < 0.5):
+            bad("--path-strain", self.path_strain, "0 < path strain < 0.5")
+        if not (math.isfinite(self.path_d_eps1)
+                and 0 < self.path_d_eps1 < min(0.05, self.path_strain)):
+            bad("--path-d-eps1", self.path_d_eps1, "0 < step < min(0.05, --path-strain)")
+        self.rule.validate("rule.")
+        return self
+
+
+class Snapshot(NamedTuple):
+    """A committed static state: displacement u (ndofs,) [m], the material states (immutable
+    records: kept by reference), internal force (ndofs,) [N/m], and its path row (a dict)."""
+
+    u: np.ndarray
+    states: list
+    f_int: np.ndarray
+    row: dict
+
+
+class BurstResult(NamedTuple):
+    rows: list
+    paths: dict
+    summary: dict
+    out_dir: Path | None
+
+
+def _averages(prob, sigma, u, ratio=None) -> dict:
+    """Volume averages of a state (compression positive): s1, s2, p, q, eta, eps1, eps2, and
+    c = s1 + R s2 (by virtual work, a . f_int / B for the tie of R)."""
+    s = stress_to_model(sigma)
+    e = strain_to_model(prob.strain(u))
+    s1, s2 = float(prob.volume_average(s[0, 0])), float(prob.volume_average(s[1, 1]))
+    row = {"eps1": float(prob.volume_average(e[0, 0])),
+           "eps2": float(prob.volume_average(e[1, 1])), "s1": s1, "s2": s2, "p": 0.5 * (s1 + s2),
+           "q": s1 - s2, "eta": (s1 - s2) / (0.5 * (s1 + s2))}
+    if ratio is not None:
+        row["c"] = s1 + ratio * s2
+    return row
+
+
+def _restore(prob, snap: Snapshot) -> None:
+    prob.material.states = list(snap.states)
+
+
+def _mode_measures(prob, ratio: float, v: np.ndarray) -> tuple:
+    """How a collapse mode v (ndofs,) (the velocity at the end of a failure run) departs from
+    the homogeneous motion: (share of its strain, sum |eps(v)|^2 dx, in the weak elements, their
+    share of the area: NaN without an imperfection; |v - a U1'| / |v|, the part of v off the
+    tie's homogeneous mode a, U1' = the platen's velocity)."""
+    tie = Tie(prob, ratio)
+    w = v - tie.a * float(-np.mean(v[tie.top_y]))
+    nonuniform = float(np.linalg.norm(w) / np.linalg.norm(v))
+    if not len(prob.weak_elements):
+        return math.nan, math.nan, nonuniform
+    area = prob.dx.sum(axis=1)
+    g = prob.per_element(np.sum(prob.strain(v).reshape(4, -1) ** 2, axis=0)) * area
+    wk = prob.weak_elements
+    return float(g[wk].sum() / g.sum()), float(area[wk].sum() / area.sum()), nonuniform
+
+
+def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
+    """Run the experiment of ``cfg``; with ``out_dir``, write the outputs there (history.csv
+    and paths.csv row by row as they are computed, the rest at the end). ``progress`` a callable
+    taking one line of text (None: silent). A static step that fails after every cut-back
+    raises RuntimeError (the rows so far are on disk)."""
+    cfg.validate()
+    say = progress or (lambda line: None)
+    t_start = time.perf_counter()
+    timings = {"drained": 0.0, "paths": 0.0, "material_point": 0.0, "dynamics": 0.0}
+    sc = cfg.specimen
+    prob = build_problem(sc)
+    params = prob.params
+    B = prob.width
+    M = mass_matrix(prob, cfg.density)
+    dc = cfg.dc_value
+    rule = cfg.rule
+    imp = (f", {sc.imperfection} imperfection (phi_g {sc.imp_phi_g}, alpha0 {sc.imp_alpha0}, size "
+           f"{sc.imp_size}, angle {sc.imp_angle})" if sc.imperfection else ", perfect specimen")
+    say(f"fem burst: {prob.nel} elements, {prob.npts} points, n_dir {params.n_dir}{imp}; "
+        f"sigma2 {sc.sigma2:g} Pa; R {', '.join(f'{r:g}' for r in cfg.ratios)}; f "
+        f"{', '.join(f'{f:g}' for f in cfg.start_fractions)}; dc {dc:g} Pa; density "
+        f"{cfg.density:g} kg/m^3; damping ratio {cfg.damping_ratio:g}; {cfg.steps_per_period} "
+        f"steps a period; d_eps1 {sc.d_eps1:g} (drained), {cfg.path_d_eps1:g} (paths)")
+
+    t0 = time.perf_counter()
+    mp_curve = material_point_curve(params, MP_EPS1_MAX)
+    if not mp_curve["peak_is_interior"]:
+        raise RuntimeError(f"the material point's drained path does not peak by eps1 = "
+                           f"{MP_EPS1_MAX}: no drained peak eta to start from")
+    eta_peak = mp_curve["eta_peak"]
+    timings["material_point"] += time.perf_counter() - t0
+
+    out = Path(out_dir) if out_dir is not None else None
+    hist_w = path_w = burst_w = fields = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        hist_w = CurveWriter(out / "history.csv",
+                             ["ratio", "start_fraction", "switch"] + HISTORY_COLUMNS)
+        path_w = CurveWriter(out / "paths.csv", PATH_COLUMNS)
+        burst_w = CurveWriter(out / "burst.csv", BURST_COLUMNS)
+    rows, paths, runs = [], {}, []
+    fields_run = None
+    try:
+        # 1. the drained FE path to every start state
+        t0 = time.perf_counter()
+        fractions = sorted(set(float(f) for f in cfg.start_fractions))
+        starts = {}
+        stepper = LoadStepper(prob, sc.d_eps1, rtol=sc.rtol, max_iter=sc.max_iter,
+                              max_cutbacks=sc.max_cutbacks)
+        last = {}
+
+        def on_drained(res, info):
+            row = _averages(prob, res.trial.sigma, stepper.u)
+            last.update(row, step=stepper.step)
+            for f in fractions:
+                if f not in starts and row["eta"] >= f * eta_peak:
+                    starts[f] = Snapshot(stepper.u.copy(), list(prob.material.states),
+                                         res.f_int.copy(), dict(row, step=stepper.step))
+                    say(f"drained path: start state f = {f:g} at step {stepper.step}, eps1 = "
+                        f"{100 * row['eps1']:.4f} %, eta = {row['eta']:.4f} (target "
+                        f"{f * eta_peak:.4f})")
+
+        stepper.run(DRAINED_EPS1_MAX, on_drained, until=lambda: len(starts) == len(fractions))
+        timings["drained"] += time.perf_counter() - t0
+        missing = [f for f in fractions if f not in starts]
+        if missing:
+            raise RuntimeError(f"start fraction(s) {missing} not reached on the FE drained path "
+                               f"by eps1 = {DRAINED_EPS1_MAX} (largest eta {last.get('eta', 0):.4f}"
+                               f", material point peak {eta_peak:.4f})")
+
+        for f in cfg.start_fractions:
+            start = starts[float(f)]
+            for R in cfg.ratios:
+                key = {"ratio": float(R), "start_fraction": float(f)}
+                # 2. the tied path (and the material point's) from the start
+                t0 = time.perf_counter()
+                path, switches = _tied_path(prob, start, float(R), cfg, say)
+                timings["paths"] += time.perf_counter() - t0
+                t0 = time.perf_counter()
+                mp = material_point_path(params, float(f) * eta_peak, float(R), sc.d_eps1,
+                                         cfg.path_d_eps1, cfg.path_strain)
+                timings["material_point"] += time.perf_counter() - t0
+                paths[(float(R), float(f))] = {"fe": path, "material_point": mp}
+                if path_w is not None:
+                    for src, p in (("fe", path), ("material_point", mp)):
+                        for k in range(len(p["c"])):
+                            path_w.write(dict(key, source=src, step=k,
+                                              **{c: p[c][k] for c in PATH_COLUMNS[4:]}))
+                peak = path["peak"]
+                base = dict(key, eta_start=path["eta"][0], c_start=path["c"][0], dc=dc,
+                            eta_peak_c=path["eta"][peak] if peak is not None else math.nan,
+                            fraction_peak_c=(path["eta"][peak] / eta_peak if peak is not None
+                                             else math.nan),
+                            eps1_peak_c=(path["eps1"][peak] - path["eps1"][0]
+                                         if peak is not None else math.nan),
+                            c_peak=path["c"][peak] if peak is not None else math.nan,
+                            mp_c_peak=mp["c"][mp["peak"]] if mp["peak"] is not None else math.nan,
+                            mp_eta_peak_c=(mp["eta"][mp["peak"]] if mp["peak"] is not None
+                                           else math.nan))
+                base["c_peak_error"] = base["c_peak"] / base["mp_c_peak"] - 1
+                base["eta_peak_error"] = base["eta_peak_c"] / base["mp_eta_peak_c"] - 1
+                if peak is not None:
+                    b = base
+                    say(f"path R = {R:g}, f = {f:g}: c peak {b['c_peak'] / 1e3:.3f} kPa at eta "
+                        f"{b['eta_peak_c']:.4f} (material point {b['mp_c_peak'] / 1e3:.3f} kPa at "
+                        f"eta {b['mp_eta_peak_c']:.4f}: {100 * b['c_peak_error']:+.3f} %, "
+                        f"{100 * b['eta_peak_error']:+.3f} %)")
+                else:
+                    say(f"path R = {R:g}, f = {f:g}: c does not peak within the path strain "
+                        f"{cfg.path_strain}: one below run at its end")
+                # 3. the runs at a held force
+                for name, snap in switches:
+                    t0 = time.perf_counter()
+                    tag = dict(key, switch=name)
+                    frames = None
+                    if cfg.fields and out is not None and name == "past" and fields is None:
+                        fields = FieldWriter(out / "fields.xdmf", prob.mesh.p.T, _cells(prob))
+                        fields_run = tag
+                        frames = fields
+                    res, t1 = _held_run(prob, M, snap, float(R), B * dc, cfg, rule, tag, say,
+                                        hist_w, frames)
+                    timings["dynamics"] += time.perf_counter() - t0
+                    h = res.history
+                    share, area, nonuniform = (_mode_measures(prob, float(R), res.v)
+                                               if res.outcome == "failure" else (math.nan,) * 3)
+                    row = dict(base, switch=name, c_switch=snap.row["c"], outcome=res.outcome,
+                               ke_growth=ke_growth(h["ke"]), ke_max=float(h["ke"].max()),
+                               w2_ext_end=h["w2_ext"][-1], w2_int_end=h["w2_int"][-1],
+                               t_end=h["t"][-1], steps=int(h["step"][-1]),
+                               energy_residual=float(h["balance_residual"].max()),
+                               eq1_residual=float(h["eq1_residual"].max()), t1=t1, dt=res.dt,
+                               eps1_switch=snap.row["eps1"], eta_switch=snap.row["eta"],
+                               mode_band_share=share, band_area_share=area,
+                               mode_nonuniform=nonuniform,
+                               newton_iters_mean=float(h["newton_iters"][1:].mean())
+                               if len(h["t"]) > 1 else 0.0,
+                               seconds=res.seconds)
+                    rows.append(row)
+                    runs.append((tag, res))
+                    if burst_w is not None:
+                        burst_w.write(row)
+                    say(f"{_label(tag)}: {res.outcome} after {row['steps']} steps "
+                        f"({row['t_end'] / t1:.1f} T1, T1 = {1e3 * t1:.4f} ms), E_c growth "
+                        f"{row['ke_growth']:.3g}, max balance residual {row['energy_residual']:.2e}"
+                        f", {res.seconds:.1f} s")
+    finally:
+        for w in (hist_w, path_w, burst_w, fields):
+            if w is not None:
+                w.close()
+    timings["total"] = time.perf_counter() - t_start
+    summary = {"config": asdict(cfg), "dc": dc, "parameters": asdict(params),
+               "material_point_drained_peak": {"eta": eta_peak, "eps1": mp_curve["eps1_peak"]},
+               "mesh": {"elements": prob.nel, "points": prob.npts, "dofs": prob.ndofs},
+               "fields": ({"run": fields_run, "frames_every": _frame_every(cfg)}
+                          if fields_run else None),
+               "runs": rows, "timings": timings}
+    if out is not None:
+        t0 = time.perf_counter()
+        _figures(out, prob, paths, runs, rows, mp_curve)
+        timings["figures"] = time.perf_counter() - t0
+        atomic_write_bytes(out / "summary.json",
+                           json.dumps(summary, indent=1, default=_json_default).encode())
+    return BurstResult(rows, paths, summary, out)
+
+
+def _json_default(v):
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.floating,)):
+        return float(v)
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return str(v)
+
+
+def _label(tag: dict) -> str:
+    return f"R = {tag['ratio']:g}, f = {tag['start_fraction']:g}, {tag['switch']}"
+
+
+def _tied_path(prob, start: Snapshot, ratio: float, cfg: BurstConfig, say):
+    """The quasi-static proportional path from ``start`` under the tie of ``ratio`` (U1 in steps
+    of cfg.path_d_eps1 H): rows (eps1, eps2, s1, s2, p, q, eta, c; row 0 the start), the peak
+    row, the below row, and the switch states [(name, Snapshot)]: ('below', ...) and, if c
+    peaked, ('past', the peak).
+
+    The path runs twice: once to find the peak and the below row, then again from the start to
+    keep those two states (a state of 800 points x 180 orientations is ~12 MB: the states of a
+    whole path are not kept). The steps are deterministic, so the second run is the first one
+    again, bit for bit (checked on c)."""
+    sc = cfg.specimen
+
+    def stepper():
+        _restore(prob, start)
+        return LoadStepper(static, cfg.path_d_eps1, rtol=sc.rtol, max_iter=sc.max_iter,
+                           max_cutbacks=sc.max_cutbacks, u0=start.u, du0=tie.a)
+
+    tie = Tie(prob, ratio)
+    static = TiedStatic(tie, start.u)
+    st = stepper()
+    row0 = _averages(prob, prob.material.stress(), start.u, ratio)
+    rows = {k: [v] for k, v in row0.items()}
+    peak = CPeak(row0["c"])
+    last = {}
+
+    def on_step(res, info):
+        row = _averages(prob, res.trial.sigma, st.u, ratio)
+        for k, v in row.items():
+            rows[k].append(v)
+        peak.add(row["c"])
+        last["snap"] = Snapshot(st.u.copy(), list(prob.material.states), res.f_int.copy(), row)
+
+    st.run(cfg.path_strain, on_step, until=lambda: peak.confirmed)
+    say(f"path R = {ratio:g}: {st.step} steps to eps1 = "
+        f"{100 * (rows['eps1'][-1] - rows['eps1'][0]):.3f} % from the start, "
+        f"{st.times['iterations']} Newton iterations")
+    path = {k: np.array(v) for k, v in rows.items()}
+    path["peak"] = peak.peak
+    path["below"] = peak.below(BELOW_FRACTION)
+    if peak.peak is None:
+        return path, [("below", last["snap"])]
+    want = {path["below"]: "below", peak.peak: "past"}
+    kept = {}
+    st = stepper()
+
+    def keep(res, info):
+        if st.step in want:
+            row = _averages(prob, res.trial.sigma, st.u, ratio)
+            if row["c"] != path["c"][st.step]:
+                raise RuntimeError(f"the replayed path differs from the first at step {st.step}")
+            kept[want[st.step]] = Snapshot(st.u.copy(), list(prob.material.states),
+                                           res.f_int.copy(), row)
+
+    if path["below"] == 0:
+        kept["below"] = Snapshot(start.u.copy(), list(start.states), start.f_int, row0)
+    st.run(cfg.path_strain, keep, until=lambda: st.step >= peak.peak)
+    return path, [("below", kept["below"]), ("past", kept["past"])]
+
+
+def _frame_every(cfg: BurstConfig) -> int:
+    """Steps between two frames of fields.xdmf: four frames a lowest period."""
+    return max(1, cfg.steps_per_period // 4)
+
+
+def _held_run(prob, M, snap: Snapshot, ratio: float, dG: float, cfg: BurstConfig, rule, tag,
+              say, history, fields):
+    """From the switch state ``snap`` at rest: its lowest elastic period T1 (sliding prevented,
+    U1 free), then ``hold`` at G_switch + dG, each step written to ``history`` (a CurveWriter
+    or None) as it converges, four frames a period to ``fields`` (FieldWriter or None).
+    Returns (HoldResult, T1)."""
+    _restore(prob, snap)
+    tie = Tie(prob, ratio)
+    elastic = prob.material.trial(np.zeros((2, 2, prob.npts)), elastic=True)
+    omega1, _ = lowest_mode(tie.reduce_matrix(prob.stiffness(elastic.D)), tie.reduce_matrix(M))
+    t1 = 2.0 * math.pi / omega1
+    every = _frame_every(cfg)
+    report = max(1, 2 * cfg.steps_per_period)
+    t0 = time.perf_counter()
+
+    def on_step(k, m, system, row):
+        if history is not None:
+            history.write(dict(tag, **row))
+        if fields is not None and k % every == 0:
+            _frame(fields, prob, tie, snap.u, k * (t1 / cfg.steps_per_period), m, ratio)
+        if k and k % report == 0:
+            u1 = float(m.z[-1])
+            ke = 0.5 * float(m.v @ (system.M @ m.v))
+            say(f"{_label(tag)}: step {k} t = {k / cfg.steps_per_period:.1f} T1 E_c = {ke:.3e} J/m "
+                f"dU1 = {u1:.3e} m W2_ext = {system.dG * u1:.3e} J/m "
+                f"({time.perf_counter() - t0:.1f} s)")
+
+    sc = cfg.specimen
+    res = hold(tie, M, snap.u, dG, t1, cfg.steps_per_period, cfg.damping_ratio, rule,
+               eps_ref=(snap.row["eps1"], snap.row["eps2"]), rtol=sc.rtol, max_iter=sc.max_iter,
+               on_step=on_step)
+    return res, t1
+
+
+def _frame(fields, prob, tie, u_ref, t, m, ratio):
+    """One frame of fields.xdmf: point data displacement (since the isotropic state), velocity
+    [m/s], mode (the velocity scaled to a largest nodal value of 1, dimensionless); cell data
+    c = s1 + R s2 [Pa] and the sliding fraction of the committed state."""
+    u = u_ref + tie.displacement(m.z)
+    v = tie.displacement(m.v)
+    vel = nodal_vector(prob, v)
+    top = float(np.max(np.linalg.norm(vel, axis=1)))
+    s = stress_to_model(prob.material.stress())
+    sliding, _ = prob.material.fractions()
+    fields.write(t, {"displacement": nodal_vector(prob, u), "velocity": vel,
+                     "mode": vel / top if top > 0 else vel},
+                 {"c": [prob.per_element(s[0, 0] + ratio * s[1, 1])],
+                  "sliding_fraction": [prob.per_element(sliding)],
+                  "strain_tension_positive": [cell_tensor(prob, prob.strain(u))]})
+
+
+def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
+    """ke.png, balance.png, path.png and mode_*.png (see docs/fem.md)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def finish(fig, ax, xlabel, ylabel, title, name):
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title, fontsize=8)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+        save_figure(fig, out / name, dpi=120)
+
+    starts = sorted({(tag["ratio"], tag["start_fraction"]) for tag, _ in runs})
+    color = {s: f"C{i % 10}" for i, s in enumerate(starts)}
+    style = {"below": "--", "past": "-"}
+    # E_c(t), log axis
+    fig, ax = plt.subplots(figsize=(7.5, 5))
+    for tag, res in runs:
+        h = res.history
+        s = (tag["ratio"], tag["start_fraction"])
+        t = 1e3 * h["t"][1:]
+        pos = lambda x: np.where(x > 0, x, np.nan)         # noqa: E731 (log axis: E_c = 0 left out)
+        ax.semilogy(t, pos(h["ke"][1:]), style[tag["switch"]], color=color[s],
+                    lw=1.3, label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}: {res.outcome} "
+                                  f"(T1 = {1e3 * res.t1:.3f} ms)")
+        ax.plot(t[-1], h["ke"][-1], "x" if res.outcome == "failure" else "o", color=color[s],
+                mfc="none")
+        ax.semilogy(t, pos(h["w2_ext"][1:]), ":", color=color[s], lw=0.9,
+                    label=r"$W_{2,ext} = dG\,\Delta U_1$ (Eq. 1: $E_c \leq W_{2,ext}$ while "
+                          r"$W_{2,int} \geq 0$)" if (tag, res) == runs[0] else None)
+    if not any(np.any(res.history["ke"] > 0) for _, res in runs):
+        ax.set_yscale("linear")                       # dc = 0: nothing moved, E_c = 0
+    finish(fig, ax, "time since the switch t [ms]",
+           r"kinetic energy $E_c$ [J/m] (per unit thickness)",
+           "G held at G_switch + dG: kinetic energy (x: failure, o: equilibrium / undecided, by "
+           "hmodel.burst_rule); dotted: the work of dG", "ke.png")
+    # the energy balance residual per step
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for tag, res in runs:
+        h = res.history
+        s = (tag["ratio"], tag["start_fraction"])
+        ax.semilogy(h["step"][1:], np.where(h["balance_residual"][1:] > 0,
+                                            h["balance_residual"][1:], np.nan),
+                    style[tag["switch"]], color=color[s], lw=1,
+                    label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}")
+    ax.axhline(1e-6, color="k", lw=0.8, ls=":", label="1e-6")
+    finish(fig, ax, "time step since the switch",
+           r"$|\Delta E_c - (\Delta W_{ext} - \Delta W_{int} - \Delta D)|$ / "
+           r"max($E_c$, |$W_2$|, D) [-]",
+           "discrete energy balance of each step (Newmark average acceleration: exact up to the "
+           "Newton tolerance)", "balance.png")
+    # c against eps1, FE and material point, peaks and switches marked
+    fig, ax = plt.subplots(figsize=(7.5, 5))
+    for s in starts:
+        p = paths[s]
+        fe, mp = p["fe"], p["material_point"]
+        ax.plot(100 * fe["eps1"], fe["c"] / 1e3, "o-", ms=3, color=color[s], lw=1,
+                label=f"FE, R = {s[0]:g}, f = {s[1]:g}")
+        ax.plot(100 * mp["eps1"], mp["c"] / 1e3, "k--", lw=0.9,
+                label="material point, same steps" if s == starts[0] else None)
+        if fe["peak"] is not None:
+            k = fe["peak"]
+            ax.plot(100 * fe["eps1"][k], fe["c"][k] / 1e3, "*", ms=13, color=color[s], mfc="none",
+                    label=f"FE c peak, eta = {fe['eta'][k]:.4f} (past switch)")
+        if mp["peak"] is not None:
+            k = mp["peak"]
+            ax.plot(100 * mp["eps1"][k], mp["c"][k] / 1e3, "k+", ms=12,
+                    label=f"material point c peak, eta = {mp['eta'][k]:.4f}")
+        k = fe["below"]
+        ax.plot(100 * fe["eps1"][k], fe["c"][k] / 1e3, "v", ms=9, color=color[s], mfc="none",
+                label=f"below switch (95 % of the rise), eta = {fe['eta'][k]:.4f}")
+    finish(fig, ax, r"axial strain $\varepsilon_1$ [%] (compression +)",
+           r"$c = \sigma_1 + R\,\sigma_2$ [kPa]",
+           f"proportional strain paths from the drained path (material point drained peak eta "
+           f"{mp_curve['eta_peak']:.4f})", "path.png")
+    # the collapse mode of each failure run
+    for tag, res in runs:
+        if res.outcome == "failure" and np.any(res.v):
+            name = f"mode_R{tag['ratio']:g}_f{tag['start_fraction']:g}_{tag['switch']}.png"
+            plot_mode(out / name, prob, res.v,
+                      title=(f"collapse mode (velocity at the end), {_label(tag)}, "
+                             f"t = {1e3 * res.history['t'][-1]:.3f} ms"))

@@ -6,7 +6,7 @@
    converged step with eta >= f x the material point's drained peak eta;
 2. from each start and for each ratio R, the proportional strain path under the tie
    (``fem.dynamics.Tie``), U1 prescribed in steps of d_eps1 H (static Newton, cut-back), c = G/B
-   recorded until it has peaked (``fem.reference.CPeak``) or the path strain;
+   recorded until it has peaked (``hmodel.burst.CPeak``) or the path strain;
 3. from the ``below`` and ``past`` switch states, at rest, G held at G_switch + dG
    (``fem.dynamics.hold``, Newmark average acceleration, Rayleigh mass damping), the outcome by
    ``hmodel.burst_rule.decide``;
@@ -35,14 +35,14 @@ from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
 from .output import CurveWriter, FieldWriter, cell_tensor, nodal_vector, plot_mode
-from .reference import CPeak, material_point_curve, material_point_path
+from hmodel.burst import CPeak
+
+from .reference import material_point_curve, material_point_path
 from .solver import LoadStepper
 
 __all__ = ["BurstConfig", "run_burst", "BurstResult", "BURST_COLUMNS", "PATH_COLUMNS",
-           "BELOW_FRACTION", "DRAINED_EPS1_MAX"]
+           "DRAINED_EPS1_MAX"]
 
-# the below switch: the first state where c has risen by this fraction of its rise to the peak
-BELOW_FRACTION = 0.95
 # the drained FE path gives up here if a start state is not reached [-]
 DRAINED_EPS1_MAX = 0.1
 # the material point's drained curve is computed to this axial strain (its peak ~2.1 %) [-]
@@ -297,13 +297,16 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                         fields = FieldWriter(out / "fields.xdmf", prob.mesh.p.T, _cells(prob))
                         fields_run = tag
                         frames = fields
-                    res, t1 = _held_run(prob, M, snap, float(R), B * dc, cfg, rule, tag, say,
+                    k_sw = path["below"] if name == "below" else path["peak"]
+                    dc_run = path["cpeak"].dc_below(k_sw, dc)
+                    res, t1 = _held_run(prob, M, snap, float(R), B * dc_run, cfg, rule, tag, say,
                                         hist_w, frames)
                     timings["dynamics"] += time.perf_counter() - t0
                     h = res.history
                     share, area, nonuniform = (_mode_measures(prob, float(R), res.v)
                                                if res.outcome == "failure" else (math.nan,) * 3)
-                    row = dict(base, switch=name, c_switch=snap.row["c"], outcome=res.outcome,
+                    row = dict(base, switch=name, dc=dc_run, c_switch=snap.row["c"],
+                               outcome=res.outcome,
                                ke_growth=ke_growth(h["ke"]), ke_max=float(h["ke"].max()),
                                w2_ext_end=h["w2_ext"][-1], w2_int_end=h["w2_int"][-1],
                                t_end=h["t"][-1], steps=int(h["step"][-1]),
@@ -395,10 +398,13 @@ def _tied_path(prob, start: Snapshot, ratio: float, cfg: BurstConfig, say):
         f"{st.times['iterations']} Newton iterations")
     path = {k: np.array(v) for k, v in rows.items()}
     path["peak"] = peak.peak
-    path["below"] = peak.below(BELOW_FRACTION)
+    path["below"] = peak.below()
+    path["cpeak"] = peak
     if peak.peak is None:
         return path, [("below", last["snap"])]
-    want = {path["below"]: "below", peak.peak: "past"}
+    want = {peak.peak: "past"}
+    if path["below"] is not None:            # None: c falls at once, no state below the peak
+        want[path["below"]] = "below"
     kept = {}
     st = stepper()
 
@@ -412,8 +418,11 @@ def _tied_path(prob, start: Snapshot, ratio: float, cfg: BurstConfig, say):
 
     if path["below"] == 0:
         kept["below"] = Snapshot(start.u.copy(), list(start.states), start.f_int, row0)
-    st.run(cfg.path_strain, keep, until=lambda: st.step >= peak.peak)
-    return path, [("below", kept["below"]), ("past", kept["past"])]
+    if peak.peak > 0:
+        st.run(cfg.path_strain, keep, until=lambda: st.step >= peak.peak)
+    else:
+        kept["past"] = Snapshot(start.u.copy(), list(start.states), start.f_int, row0)
+    return path, [(n, kept[n]) for n in ("below", "past") if n in kept]
 
 
 def _frame_every(cfg: BurstConfig) -> int:

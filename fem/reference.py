@@ -21,6 +21,7 @@ import numpy as np
 from hmodel import HParams
 from hmodel.driver import (MixedControl, isotropic_state, mixed_step, run_path, drained_biaxial,
                            proportional_strain, stress_invariants)
+from hmodel.burst import CPeak, proportional_path
 from hmodel.experiment import state_at_eta
 from hmodel.material import to_voigt
 
@@ -76,47 +77,6 @@ def material_point_curve(params: HParams, eps1_max: float, d_eps1: float = 1e-5)
             "q_peak": float(q[k]), "eta_peak": float(eta[k]), "peak_is_interior": k < len(q) - 1}
 
 
-class CPeak:
-    """The peak of c = s1 + R s2 along a proportional strain path, by the rule of docs/burst.md:
-    the largest c, confirmed once c has fallen below it by ``FALL`` of its rise from the start
-    (c_peak - c_start; a margin far above the Newton tolerance of c, far below a step's change
-    near the peak), so that a peak is a peak. Feed c state by state (row 0 the start) with
-    ``add``, which returns True once the peak is confirmed."""
-
-    FALL = 1e-3
-
-    def __init__(self, c_start: float):
-        self.c = [float(c_start)]
-        self.k_max = 0
-        self.confirmed = False
-
-    def add(self, c: float) -> bool:
-        self.c.append(float(c))
-        if self.c[-1] > self.c[self.k_max]:
-            self.k_max = len(self.c) - 1
-        rise = self.c[self.k_max] - self.c[0]
-        fall = self.FALL * rise if rise > 0 else 1e-12 * abs(self.c[0])
-        self.confirmed = self.confirmed or self.c[self.k_max] - self.c[-1] > fall
-        return self.confirmed
-
-    @property
-    def peak(self):
-        """Row of the confirmed peak, or None (c has not peaked on the path so far)."""
-        return self.k_max if self.confirmed else None
-
-    def threshold(self, fraction: float = 0.95) -> float:
-        """c_start + fraction (c_max - c_start), c_max the largest c so far."""
-        return self.c[0] + fraction * (self.c[self.k_max] - self.c[0])
-
-    def below(self, fraction: float = 0.95) -> int:
-        """Row of the ``below`` switch: the first state where c has risen by ``fraction`` of its
-        rise from the start to the peak; without a peak, the last row (the end of the path)."""
-        if not self.confirmed:
-            return len(self.c) - 1
-        th = self.threshold(fraction)
-        return next(k for k, c in enumerate(self.c) if c >= th)
-
-
 def material_point_path(params: HParams, eta_start: float, ratio: float, d_eps1: float,
                         path_d_eps1: float, path_strain: float) -> dict:
     """The material point's burst path (docs/burst.md): the drained path (``state_at_eta``,
@@ -128,11 +88,7 @@ def material_point_path(params: HParams, eta_start: float, ratio: float, d_eps1:
     Returns rows of the path (row 0 the start): eps1, eps2 (since the isotropic state), s1, s2,
     p, q, eta, c [Pa], and peak (row of the c peak or None), below (row of the below switch)."""
     drained, state = state_at_eta(params, eta_start, d_eps1=d_eps1)
-    s0 = to_voigt(state.stress)[0]
-    peak = CPeak(s0[0] + ratio * s0[1])
-    r = run_path(state, params, proportional_strain(path_d_eps1, ratio),
-                 max(1, int(round(path_strain / path_d_eps1))),
-                 until=lambda e, s: peak.add(s[0] + ratio * s[1]))
+    r, peak = proportional_path(state, params, ratio, path_d_eps1, path_strain)
     p, q, eta = stress_invariants(r.sigma)
     e0 = drained.eps[-1]
     return {"eps1": e0[0] + r.eps[:, 0], "eps2": e0[1] + r.eps[:, 1], "s1": r.sigma[:, 0],

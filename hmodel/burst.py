@@ -36,7 +36,7 @@ from .material import HState, broadcast_state, to_voigt, update, update_full
 from .params import HParams
 
 __all__ = ["Specimen", "Dynamics", "PathInfo", "HoldResult", "conjugate_stress", "path_direction",
-           "drained_peak_eta", "proportional_path", "static_check", "hold", "run_burst",
+           "drained_peak_eta", "proportional_path", "CPeak", "static_check", "hold", "run_burst",
            "BurstResult", "BELOW_RISE", "cone_entries", "cone_at", "BURST_COLUMNS", "HISTORY_COLUMNS",
            "PATH_COLUMNS"]
 
@@ -115,28 +115,67 @@ def drained_peak_eta(params: HParams, d_eps1: float = 1e-5, eps1_max: float = 0.
     return float(eta[k]), r
 
 
+class CPeak:
+    """The peak of c = s1 + R s2 along a proportional strain path, by the rule of docs/burst.md:
+    the largest c, confirmed once c has fallen below it by ``FALL`` of its rise from the start
+    (c_peak - c_start; a margin far above the Newton tolerance of c, far below a step's change
+    near the peak), so that a peak is a peak. Feed c state by state (row 0 the start) with
+    ``add``, which returns True once the peak is confirmed (a path's ``until``)."""
+
+    FALL = 1e-3
+
+    def __init__(self, c_start: float):
+        self.c = [float(c_start)]
+        self.k_max = 0
+        self.confirmed = False
+
+    def add(self, c: float) -> bool:
+        self.c.append(float(c))
+        if self.c[-1] > self.c[self.k_max]:
+            self.k_max = len(self.c) - 1
+        rise = self.c[self.k_max] - self.c[0]
+        fall = self.FALL * rise if rise > 0 else 1e-12 * abs(self.c[0])
+        self.confirmed = self.confirmed or self.c[self.k_max] - self.c[-1] > fall
+        return self.confirmed
+
+    @property
+    def peak(self):
+        """Row of the confirmed peak, or None (c has not peaked on the path so far)."""
+        return self.k_max if self.confirmed else None
+
+    def below(self, fraction: float = None):
+        """Row of the ``below`` switch: the first state where c has risen by ``fraction``
+        (default BELOW_RISE) of its rise from the start to the peak; without a peak, the last
+        row (the end of the path); None when the peak is the start itself (c falls at once: no
+        state of the path lies below it)."""
+        if not self.confirmed:
+            return len(self.c) - 1
+        if self.k_max == 0:
+            return None
+        th = self.c[0] + (BELOW_RISE if fraction is None else fraction) * (self.c[self.k_max] - self.c[0])
+        return next(k for k, c in enumerate(self.c) if c >= th)
+
+    def dc_below(self, k: int, dc: float) -> float:
+        """The step of c held by the run switched at row ``k`` below the peak: at most half of
+        what is left of the rise, so that the held c stays below the peak (a larger one would
+        make it a ``past`` run); dc itself past the peak or without a peak."""
+        if self.peak is None or k >= self.peak:
+            return dc
+        return min(dc, 0.5 * (self.c[self.peak] - self.c[k]))
+
+
 def proportional_path(state: HState, params: HParams, ratio: float, d_eps1: float = 1e-5,
-                      path_strain: float = 0.03) -> PathResult:
+                      path_strain: float = 0.03) -> tuple:
     """The proportional strain path d eps2 = R d eps1 from ``state`` under strain control, steps
-    d_eps1, to eps1 = path_strain (counted from the state)."""
+    d_eps1, until c has peaked (``CPeak``) or eps1 = path_strain (counted from the state).
+    Returns (PathResult, CPeak)."""
     _check_ratio(ratio)
-    n = int(round(path_strain / d_eps1))
-    return run_path(state, params, proportional_strain(d_eps1, ratio), n, label="proportional path")
-
-
-def find_peak(c) -> tuple:
-    """(k_peak, k_below) of a c history (row 0 the start): k_peak the row of the largest c, None
-    if that is the last row (c still rising: no peak within the path); k_below the first row with
-    c >= c_start + BELOW_RISE (c_peak - c_start), or, without a peak, the last row; None when the
-    peak is the start itself (c falls at once: no state below it on the path)."""
-    c = np.asarray(c, float)
-    k = int(np.argmax(c))
-    if k == len(c) - 1:
-        return None, len(c) - 1
-    if k == 0:
-        return 0, None
-    goal = c[0] + BELOW_RISE * (c[k] - c[0])
-    return k, int(np.argmax(c >= goal))
+    s0 = to_voigt(state.stress)[0]
+    peak = CPeak(s0[0] + ratio * s0[1])
+    n = max(1, int(round(path_strain / d_eps1)))
+    r = run_path(state, params, proportional_strain(d_eps1, ratio), n, label="proportional path",
+                 until=lambda e, s: peak.add(s[0] + ratio * s[1]))
+    return r, peak
 
 
 class PathInfo(NamedTuple):
@@ -354,9 +393,9 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
         r0, s0 = state_at_eta(params, f * eta_peak, params.p0, d_eps1)
         eta0 = float(r0.invariants()[2][-1])
         for R in ratios:
-            p = proportional_path(s0, params, R, d_eps1, path_strain)
+            p, pk = proportional_path(s0, params, R, d_eps1, path_strain)
             c = conjugate_stress(p.sigma, R)
-            k_peak, k_below = find_peak(c)
+            k_peak, k_below = pk.peak, pk.below()
             info = PathInfo(float(R), f, eta0, float(r0.eps[-1, 0]), p, c, k_peak, k_below, s0)
             paths.append(info)
             peak_txt = (f"c peaks at eta = {info.eta_peak_c:.4f} ({info.eta_peak_c / eta_peak:.3f} "
@@ -368,9 +407,7 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
                     continue
                 st = s0 if k == 0 else run_path(s0, params, proportional_strain(d_eps1, R), k).state
                 c_sw = float(c[k])
-                # below a peak, the held step stays below it (a dc beyond the rest of the rise
-                # would be a `past` run): at most half of what is left
-                dc_run = min(dc, 0.5 * (c[k_peak] - c_sw)) if switch == "below" and k_peak else dc
+                dc_run = pk.dc_below(k, dc)
                 stat = static_check(st, params, R, c_sw + dc_run)
                 run = hold(st, params, R, c_sw + dc_run, (p.eps[k, 0], p.eps[k, 1]), specimen,
                            dynamics)

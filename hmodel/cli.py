@@ -183,7 +183,7 @@ def cmd_burst(args, stage):
     from . import burst
     P = params_from(args)
     if args.dc is None:
-        args.dc = 1e-3 * args.sigma2
+        args.dc = 1e-4 * args.sigma2
     try:
         for R in args.ratios:
             burst._check_ratio(R)
@@ -337,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default %(default)s)")
     u.add_argument("--dc", type=R(0, lo_open=False, unit="Pa"), default=None,
                    help="step of c = s1 + R s2 held after the switch [Pa] (dG = B dc per unit "
-                        "thickness), >= 0 (default 1e-3 sigma2)")
+                        "thickness), >= 0 (default 1e-4 sigma2, as fem burst)")
     u.add_argument("--sigma2", type=R(0, unit="Pa"), default=200e3, help="confining stress [Pa]")
     u.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the paths [-]")
     u.add_argument("--path-strain", type=R(0, 0.2, hi_open=False), default=0.03,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hmodel import HParams
-from hmodel.burst import (Dynamics, Specimen, conjugate_stress, find_peak, hold, path_direction,
+from hmodel.burst import (CPeak, Dynamics, Specimen, conjugate_stress, hold, path_direction,
                           proportional_path, run_burst, static_check)
 from hmodel.burst_rule import BurstRule, decide, ke_growth
 from hmodel.cli import main
@@ -29,8 +29,8 @@ def start90(params):
 
 @pytest.fixture(scope="module")
 def path_R2(params, start90):
-    p = proportional_path(start90, params, -2.0, 1e-5, 0.01)
-    return p, conjugate_stress(p.sigma, -2.0)
+    p, pk = proportional_path(start90, params, -2.0, 1e-5, 0.01)
+    return p, conjugate_stress(p.sigma, -2.0), pk
 
 
 # -- the generalized mixed control ------------------------------------------------------------
@@ -53,7 +53,7 @@ def test_c_controlled_steps_replay_the_strain_path(params, path_R2):
     the target, gives back its strain increment: Newton finds d eps1 = 1e-5 to its tolerance
     (c is held to 1e-10 of the stress, the path's tangent dc/deps1 ~ 2e7 Pa: d eps1 to ~1e-12)
     and the tie d eps2 = R d eps1 holds to round-off."""
-    p, c = path_R2
+    p, c, _ = path_R2
     R = -2.0
     ctl = proportional_strain_stress(R)
     st = run_path(state_at_eta(params, 0.90 * ETA_PEAK)[1], params, proportional_strain(1e-5, R), 40).state
@@ -80,18 +80,20 @@ def test_c_controlled_path_holds_the_tie_and_the_targets(params, start90):
 def test_c_peak_of_R2_from_090(params, path_R2):
     """The issue's measured figure: for R = -2 from the 0.90 state, c peaks at eta 0.998 (within
     0.005, the issue's bound)."""
-    p, c = path_R2
-    k_peak, k_below = find_peak(c)
+    p, c, pk = path_R2
+    k_peak, k_below = pk.peak, pk.below()
     assert k_peak is not None and 0 < k_below < k_peak
+    # the path stops once c has fallen by 1e-3 of its rise from the peak: a peak is a peak
+    assert c[k_peak] - c[-1] > 1e-3 * (c[k_peak] - c[0]) >= c[k_peak] - c[-2]
     eta = p.invariants()[2]
     assert abs(eta[k_peak] - 0.998) <= 0.005
     assert c[k_below] >= c[0] + 0.95 * (c[k_peak] - c[0]) > c[k_below - 1]
 
 
 def test_static_solve_under_c_control_exists_below_the_peak_and_not_past_it(params, start90, path_R2):
-    p, c = path_R2
+    p, c, pk = path_R2
     R, dc = -2.0, 200.0
-    k_peak, k_below = find_peak(c)
+    k_peak, k_below = pk.peak, pk.below()
     st = lambda k: run_path(start90, params, proportional_strain(1e-5, R), k).state
     below = static_check(st(k_below), params, R, c[k_below] + min(dc, 0.5 * (c[k_peak] - c[k_below])))
     assert below["converged"] and below["d_eps1"] > 0
@@ -101,10 +103,23 @@ def test_static_solve_under_c_control_exists_below_the_peak_and_not_past_it(para
     assert past["c_max_scan"] < c[k_peak] + dc
 
 
-def test_find_peak_cases():
-    assert find_peak([1.0, 2.0, 3.0]) == (None, 2)              # still rising: no peak
-    assert find_peak([3.0, 2.0, 1.0]) == (0, None)              # falls at once
-    assert find_peak([0.0, 5.0, 9.6, 10.0, 9.0]) == (3, 2)      # 9.6 >= 0 + 0.95 x 10
+def _cpeak(c):
+    pk = CPeak(c[0])
+    for x in c[1:]:
+        pk.add(x)
+    return pk
+
+
+def test_cpeak_cases():
+    pk = _cpeak([1.0, 2.0, 3.0])                      # still rising: no peak, below at the end
+    assert (pk.peak, pk.below(), pk.dc_below(2, 5.0)) == (None, 2, 5.0)
+    pk = _cpeak([3.0, 2.0, 1.0])                      # falls at once: nothing below the peak
+    assert (pk.peak, pk.below()) == (0, None)
+    pk = _cpeak([0.0, 5.0, 9.6, 10.0, 9.0])           # 9.6 >= 0 + 0.95 x 10
+    assert (pk.peak, pk.below()) == (3, 2)
+    assert pk.dc_below(2, 5.0) == pytest.approx(0.2)  # half of what is left: held below 10
+    assert pk.dc_below(3, 5.0) == 5.0
+    assert not _cpeak([0.0, 10.0, 9.9995]).confirmed  # a fall of 5e-5 of the rise: not yet
 
 
 def test_path_direction():

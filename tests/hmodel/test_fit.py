@@ -16,6 +16,7 @@ import pytest
 import hmodel.cli as cli
 import hmodel.fit as hfit
 from hmodel import HParams
+from hmodel.experiment import biaxial_columns, biaxial_test
 from hmodel.fit import (CurveError, _covariance, _Problem, curve_check, fit_curve, jacobian,
                         make_curve, model_curve, structural_reduction, write_params)
 from hmodel.io import read_csv, write_csv
@@ -28,9 +29,18 @@ NOISE = 0.01                              # 1 % of the largest |value| of each s
 DEM_CURVE = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "gallery", "full", "biaxial.csv")
 
 
+def drained(P, eps1, d_eps1=1e-5):
+    """q, eps_v of the drained test at the axial strains ``eps1`` (multiples of ``d_eps1``), from
+    the CSV columns of ``python -m hmodel biaxial``: independent of ``model_curve``."""
+    cols = biaxial_columns(biaxial_test(P, P.p0, d_eps1, float(eps1[-1])))
+    k = np.rint(np.asarray(eps1) / d_eps1).astype(int)
+    assert np.allclose(cols["eps1"][k], eps1, rtol=0, atol=1e-12)
+    return cols["q"][k], cols["eps_v"][k]
+
+
 def noisy(P=TABLE_I, eps1=EPS1, seed=1, noise=NOISE):
     """(clean q, clean eps_v, Curve with Gaussian noise of ``noise`` x max |series|)."""
-    q, v, _ = model_curve(P, eps1, 1e-5)
+    q, v = drained(P, eps1)
     rng = np.random.default_rng(seed)
     qn = q + noise * np.abs(q).max() * rng.standard_normal(q.size)
     vn = v + noise * np.abs(v).max() * rng.standard_normal(v.size)
@@ -87,11 +97,24 @@ def test_structural_reduction():
     assert structural_reduction(("kn", "kt", "phi_g", "alpha0", "p0"), TABLE_I)[1] == {}
 
 
+def test_model_curve_is_the_drained_path():
+    """At the path's own strains model_curve returns the columns of ``hmodel biaxial`` (q, and
+    eps_v = eps1 + eps2, contraction positive) exactly; a path that fails has no strength beyond."""
+    q, v = drained(TABLE_I, EPS1, 1e-4)
+    qm, vm, fail = model_curve(TABLE_I, EPS1, 1e-4)
+    assert math.isnan(fail) and np.allclose(qm, q, rtol=1e-12) and np.allclose(vm, v, rtol=1e-12)
+    assert vm[5] > 0 > vm[-1]                      # contracts first, dilates later (Fig. 5)
+    loose = TABLE_I.replace(alpha0=75.0)           # hexagons open early: no drained equilibrium
+    qm, vm, fail = model_curve(loose, EPS1, 1e-4)
+    assert 0 < fail < EPS1[-1]
+    assert np.all(qm[EPS1 > fail] == 0) and np.all(qm[1:][EPS1[1:] <= fail] > 0)
+
+
 def test_coarse_step_changes_little():
     """The search runs the model with steps 1e-4 (the default): q moves by < 4e-4 of its peak
     (measured 1.8e-4), eps_v by < 1e-3 of its largest value (5.6e-4), against 1 % noise. (Steps
     of 2e-4 miss the steep start by 0.6 % of the peak.)"""
-    q, v, _ = model_curve(TABLE_I, EPS1, 1e-5)
+    q, v = drained(TABLE_I, EPS1)
     qc, vc, _ = model_curve(TABLE_I, EPS1, 1e-4)
     assert np.max(np.abs(qc - q)) < 4e-4 * q.max() and np.max(np.abs(vc - v)) < 1e-3 * np.abs(v).max()
 

@@ -473,7 +473,7 @@ def fit_curve(curve: Curve, base: HParams, free=DEFAULT_FREE, bounds: dict | Non
     2. ``structural_reduction``: the parameters a drained curve cannot tell apart are held.
     3. From the given start and n_starts - 1 Latin-hypercube starts (``seed``), least squares
        with the model's path in steps ``d_eps1_search``; the lowest cost is polished with steps
-       ``d_eps1`` (its change is reported in standard deviations: ``info['search_vs_final']``).
+       ``d_eps1`` (its change is reported in standard deviations: ``info['search_vs_final_in_sd']``).
     4. At the optimum, the covariance s^2 (J^T J)^-1 of the fitted coordinates, s^2 the residual
        variance times (1 + rho)/(1 - rho), rho the lag-1 correlation of the residuals (an AR(1)
        allowance for correlated noise and misfit along the curve). A parameter is determined
@@ -645,7 +645,7 @@ def _covariance(J, s2):
 
 
 def summary_dict(res: FitResult, curve: Curve) -> dict:
-    """The fit as a JSON-ready dict (summary.json)."""
+    """The fit as a JSON-ready dict (summary.json); starts are numbered from 1 there."""
     i = dict(res.info)
     out = {"status": res.status, "reason": res.reason, "data": curve.source,
            "n_points": int(curve.eps1.size), "eps1_range": [float(curve.eps1[0]), float(curve.eps1[-1])],
@@ -653,7 +653,8 @@ def summary_dict(res: FitResult, curve: Curve) -> dict:
            "bounds": {k: list(v) for k, v in i.pop("bounds").items()}, "check_of_the_data": i.pop("check"),
            "fitted": res.estimates, "undetermined": res.undetermined,
            "params": _fields(res.params) if res.params is not None else None,
-           "starts": res.starts, "chosen_start": res.chosen, "cost": res.cost}
+           "starts": res.starts, "chosen_start": None if res.chosen is None else res.chosen + 1,
+           "cost": res.cost}
     out.update(i)
     return _jsonable(out)
 

@@ -237,6 +237,38 @@ def _figures(c: dict, out: str, dem_curve: dict, fit_curve: dict):
     save_figure(fig, os.path.join(out, "fig_domain_pq.png"))
 
 
+def _polar_figures(c: dict, P: HParams, out: str, dem_dir: str, n: int) -> list:
+    """fig_polar_<state>.png for the DEM's last stable state and its first unstable one: the
+    DEM's settled probes (dots) and failures (triangles on the W2 = 0 circle) beside the H-model's
+    ds.de/(|ds||de|) at the same fraction of its peak (``plots.fig_polar_w2``). Returns the names."""
+    from .plots import fig_polar_w2
+    with open(os.path.join(dem_dir, "domain12000", "domain_probes.csv"), newline="") as f:
+        probes = list(csv.DictReader(f))
+    d = c["dem"]
+    names = []
+    for s in c["states"]:
+        if s["state"] not in (d["last_stable_state"], d["lower_state"]):
+            continue
+        _, st = state_at_eta(P, s["h_same_fraction"]["eta"])
+        sw = directional_sweep(st, P, n=n)
+        rows = [r for r in probes if r["state"] == s["state"]]
+        a = np.array([float(r["alpha_sigma"]) for r in rows])
+        w = np.array([float(r["w2"]) if r["outcome"] == "equilibrium" else np.nan for r in rows])
+        fail = np.array([r["outcome"] == "failure" for r in rows])
+        series = [("H-model (fitted), same fraction of its peak", sw.alpha_sigma,
+                   eulerian_w2(sw.d_sigma, sw.d_eps), "C3-"),
+                  ("DEM, settled probes", a[~fail], w[~fail], "ko")]
+        if fail.any():
+            series.append(("DEM, failures (run away)", a[fail], np.zeros(fail.sum()), "C0^"))
+        name = f"fig_polar_{s['state']}.png"
+        fig_polar_w2(series, os.path.join(out, name),
+                     title=(f"{s['state']}: {s['dem_fraction']:.3f} of each peak (DEM eta "
+                            f"{s['dem_eta']:.4f}, H-model {s['h_same_fraction']['eta']:.4f}); "
+                            r"$W_2 = \delta\sigma:\delta\varepsilon / |\delta\sigma||\delta\varepsilon|$"))
+        names.append(name)
+    return names
+
+
 def _markdown(c: dict, fit_summary: dict, argv_text: str) -> str:
     h, d = c["hmodel"], c["dem"]
     st = c["states"]
@@ -266,6 +298,7 @@ def _markdown(c: dict, fit_summary: dict, argv_text: str) -> str:
                                           for o in opt_[:3]) + ".", ""]
     L += ["### Peaks and the lower boundary of the bifurcation domain", "",
           "![comparison](fig_comparison.png)", "", "![domain](fig_domain_pq.png)", "",
+          *[f"![{p[10:-4]}]({p})\n" for p in c.get("polar_figures", [])],
           "| | DEM (12,000 disks) | H-model (fitted) |", "|---|---|---|",
           f"| peak eta (p = (s1+s2)/2) | {d['eta_peak']:.4f} | {h['eta_peak']:.4f} |",
           f"| peak q [kPa] at eps1 [%] | {c['dem_q_peak'] / 1e3:.1f} at {100 * c['dem_eps1_peak']:.2f} | "
@@ -448,6 +481,7 @@ def main(argv=None) -> int:
             c["verdicts"].append(c["second_optimum"]["text"])
         pp, qq, _ = path.invariants()
         _figures(c, args.out, dem_curve, {"p": pp, "q": qq})
+        c["polar_figures"] = _polar_figures(c, P, args.out, args.dem, args.n)
         cols = {"dem_eta": [s["dem_eta"] for s in c["states"]], "dem_fraction": [s["dem_fraction"] for s in c["states"]],
                 "dem_min_w2": [s["dem_min_w2"] for s in c["states"]],
                 "dem_alpha_min_w2": [s["dem_alpha_min_w2"] for s in c["states"]],
@@ -466,7 +500,8 @@ def main(argv=None) -> int:
             if v != ap.get_default(k_))
         with atomic_open(os.path.join(args.out, "comparison.md")) as f:
             f.write(_markdown(c, fit_summary, argv_text) + "\n")
-        stage.wrote("comparison.csv", "comparison.json", "comparison.md", "fig_comparison.png", "fig_domain_pq.png")
+        stage.wrote("comparison.csv", "comparison.json", "comparison.md", "fig_comparison.png", "fig_domain_pq.png",
+                    *c["polar_figures"])
         print("\n".join(c["verdicts"]))
         print(f"wrote {args.out}/comparison.md and the rest ({c['wall_time_s']:.0f} s)")
         return 0

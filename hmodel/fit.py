@@ -600,6 +600,8 @@ def _optima(starts) -> list:
             out[-1]["starts"].append(int(k) + 1)
         else:
             out.append({"cost": s["cost"], "end": s["end"], "starts": [int(k) + 1]})
+    for o in out:
+        o["starts"].sort()
     return out
 
 
@@ -754,7 +756,7 @@ def plot_fit(curve: Curve, res: FitResult, path) -> None:
     if res.status == "fitted":
         p = res.params
         est = res.estimates
-        txt = ", ".join(f"{n} = {getattr(p, n):.4g}{'' if est[n]['determined'] else ' (not determined)'}"
+        txt = ", ".join(f"{n} = {getattr(p, n):.4g} {UNITS[n]}{'' if est[n]['determined'] else ' (not determined)'}"
                         for n in res.fitted)
         title = (f"H-model fitted at $\\sigma_2$ = {curve.sigma2 / 1e3:.4g} kPa: {txt}")
     else:

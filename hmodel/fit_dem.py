@@ -44,10 +44,14 @@ def _log(msg):
     print(f"[fit_dem] {msg}", file=sys.stderr, flush=True)
 
 
-def read_dem_domain(dem_dir) -> tuple[list, dict]:
+def read_dem_domain(dem_dir) -> tuple[list, dict, list]:
     """The DEM's domain: rows of DEM/domain12000/domain.csv (numbers as floats, the JSON columns
-    decoded) and boundaries.json."""
+    decoded), boundaries.json, and the probes of domain_probes.csv (state, alpha_sigma [deg],
+    outcome, w2, plastic)."""
     d = os.path.join(dem_dir, "domain12000")
+    with open(os.path.join(d, "domain_probes.csv"), newline="") as f:
+        probes = [{"state": r["state"], "alpha_sigma": float(r["alpha_sigma"]), "outcome": r["outcome"],
+                   "w2": float(r["w2"]), "plastic": r["plastic"] == "1"} for r in csv.DictReader(f)]
     with open(os.path.join(d, "domain.csv"), newline="") as f:
         rows = []
         for r in csv.DictReader(f):
@@ -64,7 +68,7 @@ def read_dem_domain(dem_dir) -> tuple[list, dict]:
             rows.append(row)
     with open(os.path.join(d, "boundaries.json")) as f:
         bounds = json.load(f)
-    return rows, bounds
+    return rows, bounds, probes
 
 
 def param_argv(P: HParams) -> list:
@@ -84,12 +88,13 @@ def eulerian_w2(d_sigma, d_eps):
     return np.sum(ds * de, axis=1) / (np.linalg.norm(ds, axis=1) * np.linalg.norm(de, axis=1))
 
 
-def hmodel_state(P: HParams, eta: float, n: int = 360, dem_directions=None) -> dict:
+def hmodel_state(P: HParams, eta: float, n: int = 360, dem_directions=None, curve=False) -> dict:
     """The H-model's state on the drained path at ``eta`` (P.p0 the confining stress): the minimum
     over all directions (adaptive strain-probe sweep of ``n``) of W2 (Lagrangian) and of
     ds.de/(|ds||de|) with the direction alpha_sigma [deg] of each, the cone W2 <= 0, the plastic
     zone, and the minimum of ds.de/(|ds||de|) over the stress directions ``dem_directions`` [deg]
-    (the DEM's probes)."""
+    (the DEM's probes); with ``curve`` also the sweep's alpha_sigma and ds.de/(|ds||de|)
+    (arrays, key 'curve')."""
     r, s = state_at_eta(P, eta)
     sw = directional_sweep(s, P, n=n)
     wE = eulerian_w2(sw.d_sigma, sw.d_eps)
@@ -100,6 +105,8 @@ def hmodel_state(P: HParams, eta: float, n: int = 360, dem_directions=None) -> d
            "min_w2_eulerian": float(wE[kE]), "alpha_min_w2_eulerian": float(sw.alpha_sigma[kE]),
            "cone_w2": arcs(sw.alpha_sigma, sw.w2 <= 0), "cone_w2_eulerian": arcs(sw.alpha_sigma, wE <= 0),
            "plastic_zone": arcs(sw.alpha_sigma, sw.plastic)}
+    if curve:
+        out["curve"] = (sw.alpha_sigma, wE)
     if dem_directions is not None:
         sp = stress_probes(s, P, dem_directions, sweep=sw)
         ok = sp.n_solutions > 0
@@ -113,10 +120,13 @@ def hmodel_state(P: HParams, eta: float, n: int = 360, dem_directions=None) -> d
     return out
 
 
-def compare(P: HParams, dem_rows: list, dem_bounds: dict, n: int = 360, progress=None) -> dict:
+def compare(P: HParams, dem_rows: list, dem_bounds: dict, dem_probes: list, n: int = 360,
+            progress=None) -> dict:
     """Everything the comparison reports (no file written): the fitted model's peak and domain
     point at its confining stress, the H-model at each DEM state's fraction of the peak and at
-    its eta, and the trace of the H-model's minimum W2 over ``TRACE_FRACTIONS``."""
+    its eta, direction by direction beside the DEM's probes, and the trace of the H-model's
+    minimum W2 over ``TRACE_FRACTIONS``. The H-model's sweeps at the same fractions are under
+    'curves' (arrays: dropped from the JSON)."""
     say = progress or (lambda m: None)
     path = biaxial_test(P, P.p0, 1e-5, 0.03)
     p, q, e = path.invariants()
@@ -125,7 +135,7 @@ def compare(P: HParams, dem_rows: list, dem_bounds: dict, n: int = 360, progress
     say(f"fitted model: peak eta = {eta_peak:.4f} at eps1 = {path.eps[k, 0]:.4%}; domain point")
     dp = domain_point(P, P.p0)
     dem_dirs = [float(a) for a in dem_bounds.get("directions", [])]
-    states = []
+    states, curves = [], {}
     for r in dem_rows:
         if not r["probed"]:
             continue
@@ -134,7 +144,13 @@ def compare(P: HParams, dem_rows: list, dem_bounds: dict, n: int = 360, progress
                "dem_min_w2": r["min_w2"], "dem_alpha_min_w2": r["alpha_min_w2"],
                "dem_n_failure": int(r["n_failure"]), "dem_failure_directions": r["failure_directions"],
                "dem_cone_w2": r["cone_w2"], "dem_eta_target_min_failed": r["eta_target_min_failed"]}
-        row["h_same_fraction"] = hmodel_state(P, f * eta_peak, n, dem_dirs)
+        row["h_same_fraction"] = hf = hmodel_state(P, f * eta_peak, n, dem_dirs, curve=True)
+        curves[r["state"]] = hf.pop("curve")
+        row["by_direction"] = [
+            {"alpha_sigma": pr["alpha_sigma"], "dem_outcome": pr["outcome"], "dem_plastic": pr["plastic"],
+             "dem_w2": pr["w2"] if pr["outcome"] == "equilibrium" else math.nan,
+             "h_w2": hf["w2_at_dem_directions"].get(pr["alpha_sigma"], math.nan)}
+            for pr in dem_probes if pr["state"] == r["state"]]
         row["h_same_eta"] = hmodel_state(P, r["eta"], n, dem_dirs) if r["eta"] < eta_peak else None
         say(f"{r['state']}: DEM min W2 {r['min_w2']:.3f}, H-model at the same fraction "
             f"{row['h_same_fraction']['min_w2_eulerian']:.3f}")
@@ -162,7 +178,7 @@ def compare(P: HParams, dem_rows: list, dem_bounds: dict, n: int = 360, progress
                 "last_stable_state": last_stable["state"] if last_stable else None,
                 "eta_lim": [b["eta_lim_low"], b["eta_lim_high"]], "directions": dem_dirs,
                 "boundaries": b},
-        "states": states, "trace": trace,
+        "states": states, "trace": trace, "curves": curves,
     }
 
 
@@ -237,35 +253,53 @@ def _figures(c: dict, out: str, dem_curve: dict, fit_curve: dict):
     save_figure(fig, os.path.join(out, "fig_domain_pq.png"))
 
 
-def _polar_figures(c: dict, P: HParams, out: str, dem_dir: str, n: int) -> list:
-    """fig_polar_<state>.png for the DEM's last stable state and its first unstable one: the
-    DEM's settled probes (dots) and failures (triangles on the W2 = 0 circle) beside the H-model's
-    ds.de/(|ds||de|) at the same fraction of its peak (``plots.fig_polar_w2``). Returns the names."""
+def _direction_figures(c: dict, out: str) -> list:
+    """fig_w2_by_direction.png: for every DEM state, its probes' W2 against alpha_sigma (settled:
+    dots; failures: triangles on W2 = 0) and the H-model's at the same fraction of its peak
+    (line); fig_polar_<state>.png, the same in the paper's polar diagram
+    (``plots.fig_polar_w2``) for the DEM's last stable and first unstable states. Returns the
+    names of the polar figures."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     from .plots import fig_polar_w2
-    with open(os.path.join(dem_dir, "domain12000", "domain_probes.csv"), newline="") as f:
-        probes = list(csv.DictReader(f))
-    d = c["dem"]
+    st, d = c["states"], c["dem"]
+    fig, axes = plt.subplots(1, len(st), figsize=(3.6 * len(st), 3.8), sharey=True, constrained_layout=True)
+    axes = np.atleast_1d(axes)
     names = []
-    for s in c["states"]:
-        if s["state"] not in (d["last_stable_state"], d["lower_state"]):
-            continue
-        _, st = state_at_eta(P, s["h_same_fraction"]["eta"])
-        sw = directional_sweep(st, P, n=n)
-        rows = [r for r in probes if r["state"] == s["state"]]
-        a = np.array([float(r["alpha_sigma"]) for r in rows])
-        w = np.array([float(r["w2"]) if r["outcome"] == "equilibrium" else np.nan for r in rows])
-        fail = np.array([r["outcome"] == "failure" for r in rows])
-        series = [("H-model (fitted), same fraction of its peak", sw.alpha_sigma,
-                   eulerian_w2(sw.d_sigma, sw.d_eps), "C3-"),
-                  ("DEM, settled probes", a[~fail], w[~fail], "ko")]
+    for ax, s in zip(axes, st):
+        a_h, w_h = c["curves"][s["state"]]
+        o = np.argsort(a_h)
+        bd = s["by_direction"]
+        a = np.array([b["alpha_sigma"] for b in bd])
+        w = np.array([b["dem_w2"] for b in bd])
+        fail = np.array([b["dem_outcome"] == "failure" for b in bd])
+        ax.plot(a_h[o], w_h[o], "C3-", lw=1.1, label="H-model (fitted)")
+        ax.plot(a[~fail], w[~fail], "ko", ms=4, label="DEM, settled")
         if fail.any():
-            series.append(("DEM, failures (run away)", a[fail], np.zeros(fail.sum()), "C0^"))
-        name = f"fig_polar_{s['state']}.png"
-        fig_polar_w2(series, os.path.join(out, name),
-                     title=(f"{s['state']}: {s['dem_fraction']:.3f} of each peak (DEM eta "
-                            f"{s['dem_eta']:.4f}, H-model {s['h_same_fraction']['eta']:.4f}); "
-                            r"$W_2 = \delta\sigma:\delta\varepsilon / |\delta\sigma||\delta\varepsilon|$"))
-        names.append(name)
+            ax.plot(a[fail], np.zeros(fail.sum()), "C0^", ms=6, label="DEM, run away")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xlim(0, 360)
+        ax.set_xticks(range(0, 361, 90))
+        ax.set_ylim(-0.3, 1.1)
+        ax.set_xlabel(r"$\alpha_\sigma$ [deg]")
+        ax.set_title(f"{s['state']}: {s['dem_fraction']:.3f} of the peak", fontsize=9)
+        ax.grid(alpha=0.3)
+        if s["state"] in (d["last_stable_state"], d["lower_state"]):
+            series = [("H-model (fitted), same fraction of its peak", a_h, w_h, "C3-"),
+                      ("DEM, settled probes", a[~fail], w[~fail], "ko")]
+            if fail.any():
+                series.append(("DEM, failures (run away)", a[fail], np.zeros(fail.sum()), "C0^"))
+            name = f"fig_polar_{s['state']}.png"
+            fig_polar_w2(series, os.path.join(out, name),
+                         title=(f"{s['state']}: {s['dem_fraction']:.3f} of each peak (DEM eta "
+                                f"{s['dem_eta']:.4f}, H-model {s['h_same_fraction']['eta']:.4f})\n"
+                                r"$W_2 = \delta\sigma:\delta\varepsilon / |\delta\sigma||\delta\varepsilon|$"))
+            names.append(name)
+    axes[0].set_ylabel(r"$\delta\sigma:\delta\varepsilon / |\delta\sigma||\delta\varepsilon|$ [-]")
+    axes[-1].legend(fontsize=7, loc="lower left")
+    save_figure(fig, os.path.join(out, "fig_w2_by_direction.png"))
     return names
 
 
@@ -293,11 +327,16 @@ def _markdown(c: dict, fit_summary: dict, argv_text: str) -> str:
           f"kt/kn = {g['kt_over_kn']:.3g}. RMS misfit: q {fs['rms_q'] / 1e3:.2f} kPa "
           f"({fs['rms_q'] / h['q_peak']:.1%} of the "
           f"fitted peak q), eps_v {fs['rms_eps_v']:.2e}. {len(fs['starts'])} starts reached {len(opt_)} "
-          f"distinct optima: " + "; ".join(f"cost {o['cost']:.4g} ({len(o['starts'])} starts: "
+          f"distinct optima: " + "; ".join(f"cost {o['cost']:.4g} ({len(o['starts'])} "
+                                          f"start{'s' if len(o['starts']) > 1 else ''}: "
                                           + ", ".join(f"{k_} {v:.4g}" for k_, v in o["end"].items()) + ")"
                                           for o in opt_[:3]) + ".", ""]
     L += ["### Peaks and the lower boundary of the bifurcation domain", "",
           "![comparison](fig_comparison.png)", "", "![domain](fig_domain_pq.png)", "",
+          "![by direction](fig_w2_by_direction.png)", "",
+          f"The fitted H-model's full directional analysis at the DEM's first unstable fraction "
+          f"({c['probes_fraction']:.3f} of its peak, eta = {c['probes_eta']:.4f}): `probes/` (Figs. 3, 6-9, 11, "
+          "probes.csv, summary.json); its domain at the fitted confining stress: `domain/`.", "",
           *[f"![{p[10:-4]}]({p})\n" for p in c.get("polar_figures", [])],
           "| | DEM (12,000 disks) | H-model (fitted) |", "|---|---|---|",
           f"| peak eta (p = (s1+s2)/2) | {d['eta_peak']:.4f} | {h['eta_peak']:.4f} |",
@@ -311,7 +350,7 @@ def _markdown(c: dict, fit_summary: dict, argv_text: str) -> str:
           f"({h['fraction_w2sigma']:.3f} of the peak) |",
           f"| first W2 <= 0 (Lagrangian, the paper's) | | eta {h['eta_w2']:.4f} ({h['fraction_w2']:.3f}) |",
           f"| strength under stress control | {_eta_lim_text(d)} | "
-          f"{h['eta_peak']:.4f} (the peak: no rate effects in the model) |", ""]
+          f"{h['eta_peak']:.4f} (its peak: a rate-independent material point holds any stress below it) |", ""]
     L += ["### Along the path, state by state", "",
           "DEM: minimum of ds.de/(|ds||de|) over its settled stress probes (21 directions, 5-30 deg apart). "
           "H-model: the same quantity, minimum over all directions (adaptive sweep) and over the DEM's 21 "
@@ -389,6 +428,25 @@ def verdicts(c: dict) -> list:
                "eta; the DEM's does not (0.013 at 0.932, then 0.099 at 0.957: relaxed samples with their own "
                "stick-slip history). The DEM's W2 comes from finite stress probes of 2.5 kPa, the "
                "H-model's from rate probes.".replace("0.013 at 0.932, then 0.099 at 0.957", _dem_dip(st)))
+    parts = []
+    for s in st:
+        bd = [b for b in s["by_direction"] if b["dem_outcome"] == "equilibrium" and np.isfinite(b["h_w2"])]
+        dw = np.array([b["h_w2"] - b["dem_w2"] for b in bd])
+        a = np.array([b["alpha_sigma"] for b in bd])
+        weak = (a >= 215) & (a <= 245)
+        parts.append(f"{s['state']}: RMS {np.sqrt(np.mean(dw ** 2)):.3f}, largest {np.max(np.abs(dw)):.3f} at "
+                     f"{a[np.argmax(np.abs(dw))]:.0f} deg, {np.max(np.abs(dw[weak])):.3f} from 215 to 245 deg")
+    last = st[-1]
+    close = max(abs(b["h_w2"] - b["dem_w2"]) for b in last["by_direction"]
+                if b["dem_outcome"] == "equilibrium" and 215 <= b["alpha_sigma"] <= 245)
+    h_edge = max(arc[1] for arc in last["h_same_fraction"]["plastic_zone"]) % 360
+    d_edge = max(b["alpha_sigma"] for b in last["by_direction"] if b["dem_plastic"] and b["alpha_sigma"] < 300)
+    out.append(f"- **Direction by direction** (settled DEM probes against the H-model at the same fraction; "
+               f"ds.de/(|ds||de|) on both sides): " + "; ".join(parts) + f". At {last['state']}, from 215 to "
+               f"245 deg (the DEM's weakest directions) the two agree within {close:.3f}; the largest "
+               f"differences lie at the edge of the plastic zone, which ends at {h_edge:.1f} deg in the "
+               f"H-model and reaches {d_edge:.0f} deg in the DEM (its probes still slide there, W2 low, where "
+               "the H-model's response is elastic, W2 high).")
     for s in st:
         if s["dem_n_failure"] == 0 and not s["dem_cone_w2"]:
             continue
@@ -408,9 +466,9 @@ def verdicts(c: dict) -> list:
                        f"in {', '.join(f'{a:.0f}' for a in s['dem_failure_directions'])} deg run away; the "
                        f"H-model's W2 in these directions is {min(fw):.3f} to {max(fw):.3f} (> 0). The DEM's "
                        f"runaways are its strength limit under stress control ({_eta_lim_text(d)}, "
-                       f"docs/dem.md), which these probes' targets pass (eta up to "
-                       f"{s['dem_eta_target_min_failed']:.4f} and more); the H-model, rate-independent, holds "
-                       "any stress below its peak.")
+                       f"docs/dem.md; the smallest target that failed at this state: eta = "
+                       f"{s['dem_eta_target_min_failed']:.4f}); the H-model, rate-independent, holds any "
+                       "stress below its peak.")
     return out
 
 
@@ -435,7 +493,8 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=opt.integer(8), default=360, help="strain directions of each sweep")
 
     def run(args, stage):
-        for f in ("biaxial.csv", "domain12000/domain.csv", "domain12000/boundaries.json"):
+        for f in ("biaxial.csv", "domain12000/domain.csv", "domain12000/boundaries.json",
+                  "domain12000/domain_probes.csv"):
             if not os.path.isfile(os.path.join(args.dem, f)):
                 raise opt.OptionError(f"--dem {args.dem}: no {f}: allowed the folder of a DEM run with "
                                       "its domain (docs/gallery/full)")
@@ -454,7 +513,7 @@ def main(argv=None) -> int:
             P = HParams(**json.load(f))
         with open(os.path.join(args.out, "summary.json")) as f:
             fit_summary = json.load(f)
-        rows, bounds = read_dem_domain(args.dem)
+        rows, bounds, dem_probes = read_dem_domain(args.dem)
         path = biaxial_test(P, P.p0, 1e-5, 0.03)
         _, _, e = path.invariants()
         f_a = bounds["lower_eta_fraction"]
@@ -469,7 +528,7 @@ def main(argv=None) -> int:
                 return code
             stage.wrote(f"{sub}/")
         stage.at("the comparison")
-        c = compare(P, rows, bounds, n=args.n, progress=_log)
+        c = compare(P, rows, bounds, dem_probes, n=args.n, progress=_log)
         dem_curve = read_csv(os.path.join(args.dem, "biaxial.csv"))
         kd = int(np.argmax(dem_curve["q"]))
         c["dem_q_peak"], c["dem_eps1_peak"] = float(dem_curve["q"][kd]), float(dem_curve["eps1"][kd])
@@ -481,7 +540,7 @@ def main(argv=None) -> int:
             c["verdicts"].append(c["second_optimum"]["text"])
         pp, qq, _ = path.invariants()
         _figures(c, args.out, dem_curve, {"p": pp, "q": qq})
-        c["polar_figures"] = _polar_figures(c, P, args.out, args.dem, args.n)
+        c["polar_figures"] = _direction_figures(c, args.out)
         cols = {"dem_eta": [s["dem_eta"] for s in c["states"]], "dem_fraction": [s["dem_fraction"] for s in c["states"]],
                 "dem_min_w2": [s["dem_min_w2"] for s in c["states"]],
                 "dem_alpha_min_w2": [s["dem_alpha_min_w2"] for s in c["states"]],
@@ -494,14 +553,14 @@ def main(argv=None) -> int:
         c["options"] = {k_: v for k_, v in vars(args).items()}
         c["wall_time_s"] = time.time() - t0
         with atomic_open(os.path.join(args.out, "comparison.json")) as f:
-            json.dump(_jsonable(c), f, indent=2)
+            json.dump(_jsonable({k_: v for k_, v in c.items() if k_ != "curves"}), f, indent=2)
         argv_text = "python -m hmodel.fit_dem" + "".join(
             f" --{k_.replace('_', '-')} {v}" for k_, v in vars(args).items()
             if v != ap.get_default(k_))
         with atomic_open(os.path.join(args.out, "comparison.md")) as f:
             f.write(_markdown(c, fit_summary, argv_text) + "\n")
         stage.wrote("comparison.csv", "comparison.json", "comparison.md", "fig_comparison.png", "fig_domain_pq.png",
-                    *c["polar_figures"])
+                    "fig_w2_by_direction.png", *c["polar_figures"])
         print("\n".join(c["verdicts"]))
         print(f"wrote {args.out}/comparison.md and the rest ({c['wall_time_s']:.0f} s)")
         return 0
@@ -524,9 +583,11 @@ def _second_optimum(P: HParams, fit_summary: dict, bounds: dict):
     txt = (f"- **The second optimum of the fit** (cost {o['cost']:.4g} against {opts[0]['cost']:.4g}, "
            + ", ".join(f"{k} {v:.4g}" for k, v in o["end"].items())
            + f"): peak eta {dp.q_peak / dp.p_peak:.4f}, first W2_sigma <= 0 at eta "
-           f"{dp.q_w2sigma / dp.p_w2sigma:.4f}, {frac:.3f} of its peak, {_bracket(frac, lo, hi)} "
-           + ("too." if inside else "of the DEM's boundary: the agreement above belongs to the best fit, "
-              "not to any parameter set near the DEM's curve."))
+           f"{dp.q_w2sigma / dp.p_w2sigma:.4f}, {frac:.3f} of its peak: "
+           + ("inside the DEM's bracket too." if inside else
+              _bracket(frac, lo, hi).replace("the bracket", "the DEM's bracket")
+              + ": the agreement above belongs to the best fit, not to any parameter set near the "
+              "DEM's curve."))
     return {"end": o["end"], "cost": o["cost"], "eta_peak": dp.q_peak / dp.p_peak,
             "eta_w2sigma": dp.q_w2sigma / dp.p_w2sigma, "fraction_w2sigma": frac, "text": txt}
 

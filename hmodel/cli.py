@@ -10,12 +10,12 @@ import time
 
 import numpy as np
 
+from . import fit as hfit
 from . import options as opt
 from . import plots
 from .driver import MixedControlError
 from .experiment import (DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test, bifurcation_domain,
                          compile_kernels, probe_columns, state_at_eta)
-from . import fit as hfit
 from .io import atomic_open, write_csv
 from .params import HParams, ParamError
 from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
@@ -242,7 +242,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the final fit [-]")
     f.add_argument("--d-eps1-search", type=R(0), default=1e-4,
                    help="axial strain step during the search from every start [-]")
-    f.add_argument("--max-nfev", type=opt.integer(1), default=100, help="model evaluations per start")
+    f.add_argument("--max-nfev", type=opt.integer(1), default=100,
+                   help="residual evaluations per start (each Jacobian costs 2 more model paths per free parameter)")
     f.add_argument("--out", default="out/fit", help="output folder")
     f.add_argument("--quiet", action="store_true", help="no progress lines")
     add_param_options(f)
@@ -262,7 +263,8 @@ def _arg(parse):
 
 
 def main(argv=None) -> int:
-    """``python -m hmodel ...``: 0 done, 2 bad option (one line), 130 / 143 interrupted."""
+    """``python -m hmodel ...``: 0 done, 1 not fittable (``fit``), 2 bad option (one line),
+    130 / 143 interrupted."""
     def run(args, stage):
         return args.func(args, stage) or 0
     return opt.run_cli(build_parser(), argv, run, errors=(ValueError, MixedControlError))

@@ -243,7 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--d-eps1-search", type=R(0), default=1e-4,
                    help="axial strain step during the search from every start [-]")
     f.add_argument("--max-nfev", type=opt.integer(1), default=100,
-                   help="residual evaluations per start (each Jacobian costs 2 more model paths per free parameter)")
+                   help="residual evaluations per start (each Jacobian costs 2 more model paths "
+                        "per free parameter)")
     f.add_argument("--out", default="out/fit", help="output folder")
     f.add_argument("--quiet", action="store_true", help="no progress lines")
     add_param_options(f)

@@ -1,5 +1,5 @@
-"""Command line: ``python -m hmodel {biaxial,probes,domain} ...`` (thin layer over
-``hmodel.experiment`` and ``hmodel.plots``)."""
+"""Command line: ``python -m hmodel {biaxial,probes,domain,fit} ...`` (thin layer over
+``hmodel.experiment``, ``hmodel.fit`` and ``hmodel.plots``)."""
 from __future__ import annotations
 
 import argparse
@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from . import fit as hfit
 from . import options as opt
 from . import plots
 from .driver import MixedControlError
@@ -356,14 +357,53 @@ def build_parser() -> argparse.ArgumentParser:
     u.add_argument("--out", default="out/hmodel", help="output folder")
     add_param_options(u)
     u.set_defaults(func=cmd_burst)
+
+    f = sub.add_parser("fit", help="fit the H-model to a measured drained biaxial curve (docs/fit.md)")
+    f.add_argument("--data", required=True,
+                   help="CSV with columns eps1, q [Pa] (and eps_v or eps2, s2 [Pa] where present), "
+                        "compression positive")
+    f.add_argument("--free", type=_arg(hfit.parse_free), default=hfit.DEFAULT_FREE,
+                   help=f"comma-separated free parameters, of {', '.join(hfit.FREE_CHOICES)} "
+                        f"(default {','.join(hfit.DEFAULT_FREE)}); the others as given")
+    f.add_argument("--bounds", type=_arg(hfit.parse_bounds), default={},
+                   help="NAME=LOWER:UPPER,... (SI, degrees; default x/100 to x*100 of the start for "
+                        "kn, kt, r_g, p0; phi_g 2:60; alpha0 31:70)")
+    f.add_argument("--starts", type=opt.integer(1), default=8,
+                   help="starts: the given values, then a seeded Latin hypercube in the bounds")
+    f.add_argument("--seed", type=opt.integer(0), default=0, help="seed of the starts")
+    f.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
+                   help="confining stress [Pa] (default: the median of the data's column s2 or sigma2)")
+    f.add_argument("--w-epsv", type=R(0, lo_open=False), default=1.0,
+                   help="weight of eps_v against q, each scaled by its largest |value| (0: q only)")
+    f.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the final fit [-]")
+    f.add_argument("--d-eps1-search", type=R(0), default=1e-4,
+                   help="axial strain step during the search from every start [-]")
+    f.add_argument("--max-nfev", type=opt.integer(1), default=100,
+                   help="residual evaluations per start (each Jacobian costs 2 more model paths "
+                        "per free parameter)")
+    f.add_argument("--out", default="out/fit", help="output folder")
+    f.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_param_options(f)
+    f.set_defaults(func=cmd_fit)
     return ap
 
 
+def _arg(parse):
+    """argparse type from a parser raising ValueError (the message says what is allowed)."""
+    def typed(text):
+        try:
+            return parse(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    typed.__name__ = parse.__name__
+    return typed
+
+
 def main(argv=None) -> int:
-    """``python -m hmodel ...``: 0 done, 2 bad option (one line), 130 / 143 interrupted."""
+    """``python -m hmodel ...``: 0 done, 1 not fittable (``fit``), 2 bad option (one line),
+    130 / 143 interrupted."""
     def run(args, stage):
-        args.func(args, stage)
-        return 0
+        return args.func(args, stage) or 0
     return opt.run_cli(build_parser(), argv, run, errors=(ValueError, MixedControlError))
 
 
@@ -384,3 +424,68 @@ def cmd_domain(args, stage):
         print(f"sigma2 = {d.sigma2:g} Pa: first W2<=0 at (p, q) = ({d.p_w2:.4g}, {d.q_w2:.4g}), "
               f"W2_sigma<=0 at ({d.p_w2sigma:.4g}, {d.q_w2sigma:.4g}), peak ({d.p_peak:.4g}, {d.q_peak:.4g}) Pa")
     print(f"wrote {args.out}/domain.csv, fig10_domain.png ({t_run:.1f} s)")
+
+
+def cmd_fit(args, stage):
+    """Exit 0 fitted, 1 not fittable (summary.json and fig_fit.png say why), 2 bad option."""
+    try:
+        curve = hfit.read_curve(args.data, sigma2=args.sigma2)
+    except hfit.CurveError as e:
+        raise opt.OptionError(f"--data {args.data}: {e}") from None
+    P = params_from(args, p0=curve.sigma2)
+    try:
+        hfit.check_free_bounds(args.free, args.bounds, P)
+    except ParamError as e:
+        raise opt.OptionError(f"--bounds {e.name}: {e.value!r} is out of range: allowed {e.allowed}") from None
+    except ValueError as e:
+        raise opt.OptionError(f"--free / --bounds: {e}") from None
+    fitted, held = hfit.structural_reduction(args.free, P)
+    if not fitted:
+        raise opt.OptionError("--free: none of " + ", ".join(args.free) + " enters a drained curve ("
+                              + "; ".join(f"{n} {w}" for n, w in held.items()) + ")")
+    e_max = float(curve.eps1[-1])
+    _check_path(args, e_max)
+    if args.d_eps1_search > e_max:
+        raise opt.OptionError(f"--d-eps1-search {args.d_eps1_search:g} is out of range: allowed 0 < "
+                              f"value <= {e_max:g} (the last eps1 of the data)")
+    stage.quiet = args.quiet
+    t0 = _start(args, stage, f"fit of {', '.join(args.free)} to {args.data} ({curve.eps1.size} points, "
+                f"sigma2 = {curve.sigma2:.6g} Pa: {curve.sigma2_from}), {args.starts} starts")
+    res = hfit.fit_curve(curve, P, args.free, args.bounds, n_starts=args.starts, seed=args.seed,
+                         w_epsv=args.w_epsv, d_eps1=args.d_eps1, d_eps1_search=args.d_eps1_search,
+                         max_nfev=args.max_nfev, progress=lambda m: _say(stage, m))
+    t_run = time.time() - t0
+    os.makedirs(args.out, exist_ok=True)
+    pth = lambda n: os.path.join(args.out, n)
+    summary = hfit.summary_dict(res, curve)
+    summary["options"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()
+                          if k != "func"}
+    summary["wall_time_s"] = t_run
+    if res.status == "fitted":
+        hfit.write_params(pth("params.json"), res.params)
+        stage.wrote("params.json")
+        cols = {"eps1": curve.eps1, "q": curve.q, "q_fit": res.model_q}
+        rcols = {"eps1": curve.eps1, "r_q": res.residuals_q,
+                 "r_q_weighted": res.residuals_q * res.info["weight_q"]}
+        if curve.eps_v is not None:
+            cols.update(eps_v=curve.eps_v, eps_v_fit=res.model_eps_v)
+            rcols.update(r_eps_v=res.residuals_eps_v,
+                         r_eps_v_weighted=res.residuals_eps_v * res.info["weight_eps_v"])
+        write_csv(pth("fit.csv"), cols)
+        write_csv(pth("residuals.csv"), rcols)
+        with atomic_open(pth("correlation.json")) as fh:
+            json.dump(hfit.correlation_dict(res), fh, indent=2)
+        stage.wrote("fit.csv", "residuals.csv", "correlation.json")
+    with atomic_open(pth("summary.json")) as fh:
+        json.dump(summary, fh, indent=2)
+    stage.wrote("summary.json")
+    hfit.plot_fit(curve, res, pth("fig_fit.png"))
+    stage.wrote("fig_fit.png")
+    if res.status != "fitted":
+        print(f"not fittable: {res.reason}", file=sys.stderr)
+        print(f"wrote {args.out}/summary.json, fig_fit.png")
+        return 1
+    print(hfit.format_result(res, curve))
+    print(f"wrote {args.out}/params.json, fit.csv, residuals.csv, correlation.json, summary.json, "
+          f"fig_fit.png ({t_run:.1f} s)")
+    return 0

@@ -199,7 +199,9 @@ def cmd_crosscheck(a):
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
 
-def main(argv=None):
+def build_parser() -> opt.Parser:
+    """The parser of ``python -m dem`` (every subcommand and option), built without running
+    anything: ``main`` parses with it, the tests check commands against it."""
     ap = opt.Parser(prog="python -m dem", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True, parser_class=opt.Parser)
 
@@ -367,9 +369,16 @@ def main(argv=None):
                     help="directional analyses at every saved DEM state (the DEM's bifurcation "
                          "domain); default: on, off with --full (use `dem domain` there)")
     x.set_defaults(func=cmd_crosscheck)
+    return ap
 
+
+def main(argv=None):
     def run(a, stage):
-        if hasattr(a, "out"):
+        if a.cmd == "params":     # --out is the file to write: its folder must be usable
+            if os.path.isdir(a.out):
+                raise opt.OptionError(f"--out {a.out}: is a folder: allowed a file to write")
+            opt.check_out_dir(os.path.dirname(os.path.abspath(a.out)))
+        elif hasattr(a, "out"):
             opt.check_out_dir(a.out)
         if a.cmd in ("probes", "domain", "calibrate", "crosscheck") and a.scheduler and a.workers:
             raise opt.OptionError("--workers and --scheduler: allowed one of them")
@@ -396,7 +405,7 @@ def main(argv=None):
         a.func(a)
         return 0
 
-    code = opt.run_cli(ap, argv, run, errors=(ValueError, RuntimeError))
+    code = opt.run_cli(build_parser(), argv, run, errors=(ValueError, RuntimeError))
     if code:
         sys.exit(code)
 

@@ -1,0 +1,225 @@
+"""The README's commands, as written.
+
+Every command of the README (its code blocks and the first column of its table of commands) is
+checked against the parser its CLI builds (`hmodel.cli.build_parser`, `fem.__main__.build_parser`,
+`dem.__main__.build_parser`): the subcommand exists, every option is one of the subcommand's own
+option strings as written (no abbreviation), and the whole line parses. Parsing computes and
+writes nothing; it runs in a temporary folder all the same.
+
+The cheap rows run as written: those whose README time is at most CHEAP_S = 30 s. The README's
+times were measured on the 2-core machine shared with other work (load 4-8), where a run takes 2-7
+times its idle time (docs/performance.md: the main job 20 s there, 4.1 s idle), so 30 s there is
+the issue's "under ~15 s warm" on the idle machine CI runs on. Today: `hmodel biaxial`, `hmodel
+probes`, `hmodel domain`, `hmodel burst`, `fem biaxial` (the set-up's main job), `dem params` and
+the 300-disk `dem biaxial`: 72 s together at their best under that load. The rest take minutes to
+hours (docs/performance.md). Each runs in a temporary working directory and must exit 0 and leave
+every file the row's "writes" column names in backticks (in its `--out` folder; for `params`,
+`--out` is the file).
+
+Commands other developers are adding now (issue 19) are skipped, with the reason naming them,
+while this branch's parsers lack them: PENDING and PENDING_OPTIONS, to be removed when they are
+merged.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+MAX_LINES = 150           # the issue's "under ~150 lines"
+CHEAP_S = 30.0            # README time under load 4-8: the issue's "under ~15 s warm" idle
+
+PENDING = {
+    ("hmodel", "params"): "`python -m hmodel params` (issue 19, branch params-fit) is not merged yet",
+    ("hmodel", "fit"): "`python -m hmodel fit` (issue 19, branch hmodel-fit) is not merged yet",
+    ("fem", "burst"): "`python -m fem burst` (issue 18, branch fem-burst) is not merged yet",
+    ("dem", "burst"): "`python -m dem burst` (issue 18, branch dem-burst) is not merged yet",
+}
+PENDING_OPTIONS = {
+    "--params": "`--params FILE` on every hmodel and fem command (issue 19, branch params-fit) "
+                "is not merged yet",
+}
+SET_UP = ("python3 -m venv ", ". .venv/bin/activate", "pip install ", "python -m pytest")
+
+
+def _text():
+    return README.read_text()
+
+
+def _code_block_commands(text):
+    """Every command line of the README's bash code blocks (comments dropped)."""
+    out = []
+    for block in re.findall(r"```(?:bash|sh)\n(.*?)```", text, re.S):
+        for line in block.replace("\\\n", " ").splitlines():
+            line = line.split(" #")[0].strip()
+            if line and not line.startswith("#"):
+                out.append(line)
+    return out
+
+
+def _table_rows(text):
+    """(command, writes, time) of every row of the table of commands."""
+    rows = []
+    for line in text.splitlines():
+        if not line.startswith("| `python"):
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split(" | ")]
+        assert len(cells) == 4, f"a row of the table of commands has {len(cells)} cells: {line}"
+        cmd = re.fullmatch(r"`([^`]+)`", cells[0])
+        assert cmd, f"the command cell is not one command in backticks: {cells[0]}"
+        rows.append((cmd.group(1), re.findall(r"`([^`]+)`", cells[2]), cells[3]))
+    return rows
+
+
+def _seconds(time_cell):
+    """The README's time of a row in seconds ("4 s", "[2 min](...)", "18-38 min": the larger),
+    None for "?" (a command being added)."""
+    m = re.search(r"(\d+(?:\.\d+)?)(?:-(\d+(?:\.\d+)?))?\s*(s|min)\b", time_cell)
+    if not m:
+        assert time_cell.strip() == "?", f"a time the test cannot read: {time_cell}"
+        return None
+    value = float(m.group(2) or m.group(1))
+    return value * (60.0 if m.group(3) == "min" else 1.0)
+
+
+def _segments(command):
+    return [s.strip() for s in command.split("&&")]
+
+
+def _cli(segment):
+    """(module, argv) of a `python -m hmodel|fem|dem ...` command, else None."""
+    words = shlex.split(segment)
+    if words[:2] == ["python", "-m"] and len(words) > 2 and words[2] in ("hmodel", "fem", "dem"):
+        return words[2], words[3:]
+    return None
+
+
+def _all_cli_commands():
+    text = _text()
+    seen = []
+    for command in _code_block_commands(text) + [r[0] for r in _table_rows(text)]:
+        for seg in _segments(command):
+            if _cli(seg) is None:
+                assert seg.startswith(SET_UP), (
+                    f"README command {seg!r}: neither a `python -m hmodel|fem|dem` command nor a "
+                    "set-up step; teach tests/test_readme.py to check it")
+            elif seg not in seen:
+                seen.append(seg)
+    return seen
+
+
+def _parser(module):
+    if module == "hmodel":
+        from hmodel.cli import build_parser
+    elif module == "fem":
+        from fem.__main__ import build_parser
+    else:
+        from dem.__main__ import build_parser
+    return build_parser()
+
+
+def _subparser(parser, name):
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return action.choices.get(name)
+    raise AssertionError(f"{parser.prog} has no subcommands")
+
+
+def _check_available(module, argv):
+    """Skip (naming it) a command or option being added on another branch and absent here;
+    fail on any other unknown subcommand or option. Returns the subparser."""
+    parser = _parser(module)
+    sub = _subparser(parser, argv[0])
+    if sub is None:
+        if (module, argv[0]) in PENDING:
+            pytest.skip(PENDING[(module, argv[0])])
+        raise AssertionError(f"`python -m {module}` has no subcommand {argv[0]!r}")
+    for word in argv[1:]:
+        if word.startswith("--"):
+            option = word.split("=", 1)[0]
+            if option not in sub._option_string_actions:
+                if option in PENDING_OPTIONS:
+                    pytest.skip(f"{PENDING_OPTIONS[option]}: `python -m {module} {argv[0]}` "
+                                f"has no {option} on this branch")
+                raise AssertionError(f"`python -m {module} {argv[0]}` has no option {option} "
+                                     "(written in full, as the README must)")
+    return parser
+
+
+@pytest.mark.parametrize("segment", _all_cli_commands())
+def test_readme_command_parses(segment, tmp_path, monkeypatch):
+    module, argv = _cli(segment)
+    parser = _check_available(module, argv)
+    monkeypatch.chdir(tmp_path)
+    args = parser.parse_args(argv)        # an OptionError (one line, naming the option) fails
+    assert args is not None
+    assert list(tmp_path.iterdir()) == []     # parsing wrote nothing
+
+
+def _cheap_rows():
+    return [(cmd, files) for cmd, files, t in _table_rows(_text())
+            if (s := _seconds(t)) is not None and s <= CHEAP_S]
+
+
+@pytest.mark.parametrize("command,files", _cheap_rows())
+def test_cheap_readme_command_runs(command, files, tmp_path):
+    module, argv = _cli(command)
+    _check_available(module, argv)
+    out = argv[argv.index("--out") + 1]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+               MPLBACKEND="Agg")
+    # a timeout only against a hang (no timing assertion): 10 times the README's cheap bound
+    r = subprocess.run([sys.executable, "-m", module, *argv], cwd=tmp_path, env=env,
+                       capture_output=True, text=True, timeout=10 * CHEAP_S)
+    assert r.returncode == 0, f"{command}: exit {r.returncode}\n{r.stderr[-3000:]}"
+    if argv[0] == "params":
+        assert files == [out] and (tmp_path / out).is_file()
+    else:
+        missing = [f for f in files if not (tmp_path / out / f).exists()]
+        assert files and not missing, f"{command}: the README says it writes {missing}"
+
+
+def test_cheap_rows_are_the_expected_ones():
+    """The selection by time is what the module docstring says (a changed time in the README
+    changes which commands run: say so there)."""
+    assert [c.split(" --")[0] for c, _ in _cheap_rows()] == [
+        "python -m hmodel biaxial", "python -m hmodel probes", "python -m hmodel domain",
+        "python -m hmodel burst", "python -m fem biaxial", "python -m dem params",
+        "python -m dem biaxial"]
+
+
+def test_readme_is_short():
+    n = len(_text().splitlines())
+    assert n < MAX_LINES, f"README.md has {n} lines: the issue asks for under {MAX_LINES}"
+
+
+def test_setup_block_is_what_ci_runs():
+    """The README's set-up block makes a venv, installs and runs the main job, installs the test
+    extras and runs the tests; .ci/run runs that test line exactly, and the main job is a row of
+    the table (so its outputs and time are stated, and it runs above)."""
+    lines = _code_block_commands(_text())
+    setup = [line for line in lines if line.startswith(("python3 -m venv", "pip install"))]
+    assert setup[0] == "python3 -m venv .venv && . .venv/bin/activate"
+    install_main, install_test = setup[1], setup[2]
+    assert install_main.startswith("pip install . && python -m fem biaxial")
+    assert install_test == 'pip install -e ".[test,distributed]" && python -m pytest'
+    ci = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()]
+    assert install_test in ci, ".ci/run does not run the README's test command"
+    main_job = _segments(install_main)[1]
+    assert main_job in [r[0] for r in _table_rows(_text())]
+
+
+def test_readme_links_exist():
+    for target in re.findall(r"\]\(([^)]+)\)", _text()):
+        if "://" in target:
+            continue
+        path = target.split("#")[0]
+        assert (ROOT / path).exists(), f"README links to {target}, which does not exist"

@@ -170,10 +170,10 @@ def test_a_tie_needs_a_negative_finite_ratio():
 
 
 def test_the_peak_rule_on_noisy_c():
-    # c rises with stick-slip drops of 5 kPa (the largest measured before the DEM's peak, 2000
-    # disks), peaks at 80 kPa, then falls: the slips do not confirm a peak, the fall of 10 kPa
-    # does, and below is the first record at half the rise
-    opts = BurstOptions()
+    # c rises with stick-slip drops of 5 kPa, peaks at 80 kPa, then falls: the slips do not
+    # confirm a peak, the fall of peak_drop (10 kPa here) does, and below is the first record
+    # at half the rise
+    opts = BurstOptions(peak_drop=10e3, peak_strain=2.5e-3)
     e = np.arange(600) * 1e-5
     c = 60e3 + 20e3 * np.sin(np.minimum(e / 2e-3, 1.0) * math.pi / 2) - 30e3 * np.maximum(e - 2e-3, 0) / 1e-3
     for k in (50, 120, 170):                              # slips of 5 kPa on the way up

@@ -2,6 +2,7 @@
 input refused in one line with exit code 2 before anything is computed or written."""
 import json
 import shutil
+import signal
 
 import numpy as np
 import pytest
@@ -109,3 +110,13 @@ def test_a_state_of_other_parameters_is_refused(biaxial_300, tmp_path, capsys):
                       str(pfile)], capsys)
     assert code == 2 and len(err) == 1 and "--params" in err[0] and "density" in err[0], err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupt_is_one_line(biaxial_300, tmp_path, sig, code):
+    from tests._interrupt import interrupt_after
+    rc, err = interrupt_after(["dem", "burst", "--biaxial", str(biaxial_300), "--out",
+                               str(tmp_path / "o"), "--workers", "1", "--threads", "1"],
+                              "[burst] 1 proportional", sig=sig)
+    assert rc == code
+    assert len(err) == 1 and err[0].startswith("interrupted") and "dem burst" in err[0], err

@@ -65,9 +65,8 @@ BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction
                  "eps1_peak_c", "c_start", "c_peak", "peak_confirmed_by", "switch",
                  "eta_switch", "eps1_switch", "c_switch", "dc", "c_target", "outcome",
                  "ke_growth", "ke_max", "ke_backbone_max", "w2_ext_end", "w2_walls_end",
-                 "w2_int_end", "t_end",
-                 "steps", "de1_end", "de2_end", "creep_rate", "unbalanced_end", "path_steps",
-                 "n_disks"]
+                 "w2_int_end", "t_end", "steps", "de1_end", "de2_end", "creep_rate",
+                 "unbalanced_end", "path_steps", "n_disks"]
 
 
 class BurstOptions(NamedTuple):
@@ -417,7 +416,9 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     per_run = lambda tasks: threads if threads is not None or workers == 1 or len(tasks) == 1 else 1
     log = _log if verbose else (lambda m: None)
     log(f"{len(combos)} proportional paths ({params.n} disks, rate {opts.rate:g}/s): R in "
-        f"{ratios}, start fractions {list(fractions)}")
+        f"{ratios}, start fractions {list(fractions)}; peak confirmed {opts.peak_strain:g} of "
+        f"strain beyond it or {opts.peak_drop:g} Pa below; below at {opts.below_rise:g} of the "
+        f"rise; c held at its switch value + {opts.dc:g} Pa")
     if stage:
         stage.at("dem burst: the proportional paths")
     paths = {}

@@ -190,3 +190,17 @@ def test_the_peak_rule_on_noisy_c():
     assert how == "strain" and e[stop] - e[peak] >= opts.peak_strain
     # a rise to the end of the path: no peak
     assert scan_peak(np.linspace(0, 1e4, 50), e[:50], opts)[1] == ""
+
+
+def test_the_tied_control_does_not_depend_on_the_thread_split(small_sample):
+    # the servo runs after the blocks, on the summed wall forces: 1 and 3 blocks, the same bits
+    runs = []
+    for nblocks in (1, 3):
+        sim = _sim(small_sample)
+        sim.nblocks = nblocks
+        c = _c(sim) + 5e3
+        sim.set_control(tied(R, c, c, sim.step, 0, sim.ref_len))
+        sim.run(1500)
+        runs.append(sim.state())
+    a, b = runs
+    assert all(np.array_equal(x, y) for x, y in zip(a[1:15], b[1:15]))

@@ -160,6 +160,48 @@ def cmd_domain(a):
           f"wall time {time.time() - t0:.1f} s")
 
 
+def _ratios(text):
+    """argparse type of --ratios: comma-separated R < 0 (R = 0, R > 0, not finite: why not)."""
+    from .burst import check_ratio
+    try:
+        vals = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        vals = []
+    if not vals:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of numbers: "
+                                         "allowed R < 0")
+    try:
+        return [check_ratio(v, option=None) for v in vals]
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _burst_options(a):
+    from .burst import BurstOptions
+    return BurstOptions(rate=a.rate, path_strain=a.path_strain, peak_drop=a.peak_drop,
+                        peak_strain=a.peak_strain, below_rise=a.below_rise, dc=a.dc,
+                        unbalanced_tol=a.unbalanced_tol, stress_tol=a.stress_tol,
+                        strain_tol=a.strain_tol, ke_tol=a.ke_tol, window=a.window,
+                        max_steps=a.max_steps, fail_strain=a.fail_strain).validate()
+
+
+def cmd_burst(a):
+    from .burst import run_burst
+    _threads(a)
+    t0 = time.time()
+    rows, s = run_burst(a.biaxial, a.out, a.ratios, a.start_fractions, _burst_options(a),
+                        workers=a.workers, threads=a.threads, params_file=a.params,
+                        stage=a.stage)
+    a.stage.wrote("burst.csv", "history.csv", "paths.csv", "summary.json", "fig_burst_c.png",
+                  "fig_burst_ke.png", "fig_burst_strain.png")
+    for r in rows:
+        print(f"R = {r['ratio']:g}, f = {r['start_fraction']:g}, {r['switch']} (c = "
+              f"{r['c_switch'] / 1e3:.2f} kPa + dc, eta {r['eta_switch']:.4f}): {r['outcome']} "
+              f"after {r['steps']} steps, backbone kinetic energy x{r['ke_growth']:.3g}")
+    print(f"burst: {len(rows)} runs -> {os.path.join(a.out, 'burst.csv')}, history.csv, "
+          f"paths.csv, figures; wall time {time.time() - t0:.1f} s")
+
+
 def cmd_bench(a):
     from .bench import bench
     res = bench(params=_params(a), steps=a.steps, cache_dir=a.cache, busy=a.busy_core,
@@ -227,7 +269,23 @@ def build_parser() -> opt.Parser:
                     help="threads (results do not depend on it); default: auto, see dem.threads")
     b.set_defaults(func=cmd_biaxial)
 
-    po = opt.Parser(add_help=False)     # options of every directional analysis
+    # the equilibrium rule of dem.settle: its tolerances, shared by probes, domain and burst
+    eq = opt.Parser(add_help=False)
+    eq.add_argument("--unbalanced-tol", type=opt.real(0, 1), default=1e-4,
+                    help="equilibrium: unbalanced-force ratio at every check of the window")
+    eq.add_argument("--stress-tol", type=opt.real(0), default=25.0,
+                    help="equilibrium: stress error at every check of the window [Pa] (the wall "
+                         "stresses' from their targets; dem burst: |c - c_target|)")
+    eq.add_argument("--strain-tol", type=opt.real(0, 1), default=0.01,
+                    help="equilibrium: strain drift over the window / the strain scale (a "
+                         "probe's |de|; dem burst: the larger of the strain since the switch "
+                         "and the elastic strain of 2.5 kPa)")
+    eq.add_argument("--ke-tol", type=opt.real(0), default=1e-10,
+                    help="equilibrium: backbone kinetic energy per disk [J]")
+    eq.add_argument("--window", type=opt.integer(1000), default=20_000,
+                    help="equilibrium window at 1000 disks [steps] (scaled with sqrt(n))")
+
+    po = opt.Parser(add_help=False, parents=[eq])     # options of every directional analysis
     po.add_argument("--norm", type=opt.real(0, 1e8), default=2500.0, help="|dsigma| [Pa]")
     po.add_argument("--step-q3", type=opt.real(0, 90, hi_open=False), default=5.0,
                     help="[deg] in the third quadrant")
@@ -236,17 +294,9 @@ def build_parser() -> opt.Parser:
     po.add_argument("--directions", type=opt.reals(0, 360, lo_open=False), default=None,
                     help="comma-separated alpha_sigma [deg] in place of --step-q3/--step-other")
     po.add_argument("--ramp-steps", type=opt.integer(0), default=5000)
-    po.add_argument("--unbalanced-tol", type=opt.real(0, 1), default=1e-4)
-    po.add_argument("--stress-tol", type=opt.real(0), default=25.0, help="[Pa]")
     po.add_argument("--max-steps", type=opt.integer(1), default=400_000,
                     help="cap of a probe run [steps]: undecided when reached (about 20 "
                          "windows: 400,000 at 1000 disks, 1,400,000 at 12,000)")
-    po.add_argument("--strain-tol", type=opt.real(0, 1), default=0.01,
-                    help="equilibrium: strain drift over the window / |de|")
-    po.add_argument("--ke-tol", type=opt.real(0), default=1e-10,
-                    help="equilibrium: backbone kinetic energy per disk [J]")
-    po.add_argument("--window", type=opt.integer(1000), default=20_000,
-                    help="equilibrium window at 1000 disks [steps] (scaled with sqrt(n))")
     po.add_argument("--runaway-ratio", type=opt.real(1), default=100.0,
                     help="failure: |de|/|de_elastic| beyond this with the wall stresses lost")
     po.add_argument("--fail-ratio", type=opt.real(1), default=1000.0,
@@ -288,6 +338,42 @@ def build_parser() -> opt.Parser:
     d.add_argument("--resume", action="store_true",
                     help="keep the references and probe runs already in the output folder")
     d.set_defaults(func=cmd_domain)
+
+    u = sub.add_parser("burst", parents=[eq], help="failure made to happen: the proportional strain path "
+                                     "d eps2 = R d eps1 from states of a biaxial test and its "
+                                     "conjugate stress c = s1 + R s2 held below and past its "
+                                     "peak (docs/burst.md, docs/dem.md)")
+    u.add_argument("--biaxial", required=True, help="output folder of `dem biaxial` (its states)")
+    u.add_argument("--out", required=True)
+    u.add_argument("--ratios", type=_ratios, default=[-2.0],
+                   help="comma-separated R < 0 of the paths d eps2 = R d eps1 (-1: isochoric)")
+    u.add_argument("--start-fractions", type=opt.reals(0, 1, hi_open=False), default=[0.9],
+                   help="start states: fractions of the drained peak eta saved by `dem biaxial "
+                        "--save-fractions` (comma-separated)")
+    u.add_argument("--dc", type=opt.real(0, lo_open=False), default=100.0,
+                   help="the held step of c after the switch [Pa] (dG = W t dc)")
+    u.add_argument("--rate", type=opt.real(0, 10, hi_open=False), default=0.01,
+                   help="axial strain rate of the path [1/s]")
+    u.add_argument("--path-strain", type=opt.real(0, 0.5), default=0.03,
+                   help="the path ends this axial strain from its start without a c peak")
+    u.add_argument("--peak-drop", type=opt.real(0), default=150e3,
+                   help="c this far below its largest confirms the peak [Pa]")
+    u.add_argument("--peak-strain", type=opt.real(0, 0.5), default=5e-3,
+                   help="or the path this far beyond the largest c [-]")
+    u.add_argument("--below-rise", type=opt.real(0, 1, lo_open=False), default=0.5,
+                   help="below: the first state with c >= c_start + this (c_peak - c_start)")
+    u.add_argument("--max-steps", type=opt.integer(1), default=1_000_000,
+                   help="cap of a switched run [steps]: undecided when reached")
+    u.add_argument("--fail-strain", type=opt.real(0, 1), default=0.01,
+                   help="failure: |d eps| since the switch beyond this [-]")
+    u.add_argument("--workers", type=opt.integer(1, 1024), default=None,
+                   help="local processes (the paths, then the switched runs; one thread each)")
+    u.add_argument("--threads", type=THREADS, default=None,
+                   help="threads of a run alone in the process (results do not depend on it); "
+                        "default: auto")
+    u.add_argument("--params", default=None,
+                   help="DemParams file; refused unless it is the states' own")
+    u.set_defaults(func=cmd_burst)
 
     q = sub.add_parser("params", help="write a DemParams file (the paper's set, or the options given)")
     add_param_options(q)
@@ -390,7 +476,11 @@ def main(argv=None):
         if getattr(a, "state", None):
             from . import io
             io.load_state(a.state)    # a missing or foreign state file, before the compilation
-        if getattr(a, "biaxial", None):
+        if a.cmd == "burst":
+            from .burst import load_starts
+            _burst_options(a)         # bad options and input files before the compilation
+            load_starts(a.biaxial, a.start_fractions, a.params)
+        elif getattr(a, "biaxial", None):
             from .domain import load_states
             load_states(a.biaxial, [s for s in (getattr(a, "states", None) or "").split(",") if s])
         stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"

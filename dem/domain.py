@@ -135,22 +135,26 @@ def _relax_task(args):
     return reference_state(state, out_dir, opts, resume=resume, verbose=False, threads=1)
 
 
-def load_states(biaxial_dir, names=None):
-    """[(name, State, meta)] of ``biaxial_dir/states`` (all, or the listed file names / targets),
-    and the biaxial peak eta."""
+def load_states(biaxial_dir, names=None, option="--states"):
+    """[(name, State, meta)] of ``biaxial_dir/states`` (all, or the listed file names / targets,
+    an unknown one refused naming ``option``), and the biaxial peak eta."""
     sdir = os.path.join(biaxial_dir, "states")
     listing = os.path.join(sdir, "states.csv")
     if not os.path.exists(listing):
         raise ValueError(f"--biaxial {biaxial_dir}: no states/states.csv (run `python -m dem "
                          "biaxial` with this code: it saves states along the path)")
     _, rows = io.read_csv(listing)
-    with open(os.path.join(biaxial_dir, "summary.json")) as f:
-        eta_peak = float(json.load(f)["eta_max"])
+    try:
+        with open(os.path.join(biaxial_dir, "summary.json")) as f:
+            eta_peak = float(json.load(f)["eta_max"])
+    except (OSError, ValueError, KeyError) as e:
+        raise ValueError(f"--biaxial {biaxial_dir}: no readable summary.json with eta_max "
+                         f"({type(e).__name__}: {e}); run `python -m dem biaxial` to the end")
     if names:
         known = {r["file"] for r in rows} | {r["target"] for r in rows}
         bad = [n for n in names if n not in known]
         if bad:
-            raise ValueError(f"--states {','.join(bad)}: not saved in {sdir}; allowed: "
+            raise ValueError(f"{option} {','.join(bad)}: not saved in {sdir}; allowed: "
                              + ", ".join(r["target"] for r in rows))
         rows = [r for r in rows if r["file"] in names or r["target"] in names]
     out, steps = [], set()

@@ -286,15 +286,20 @@ def wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK):
 # --------------------------------------------------------------------------------------
 @njit(**FAST)
 def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thickness,
-                gain, smoothing, vmax, dt):
+                gain, smoothing, vmax, dt, ratio):
     """Move the walls for one step.
 
-    mode (2,): per axis (0 = x walls, 1 = y walls) 0 = stress control, 1 = strain rate.
+    mode (2,): per axis (0 = x walls, 1 = y walls) 0 = stress control, 1 = strain rate, or
+    both 2 = tied (``_servo_tied``; ``ratio`` = R, used by it only).
     Stress target = s_from + (s_to - s_from) * ramp_t (compression positive) [Pa].
     Stress control: inward displacement gain * (F_target - F) / sum(k_contacts), clipped to
     vmax*dt and smoothed with the previous one (prev (4,) is updated).
     Strain control: each wall moves inward at rate * len0 / 2 [m/s] (rate > 0 compresses).
     """
+    if mode[1] == 2:
+        _servo_tied(walls, wF, wK, s_from[1] + (s_to[1] - s_from[1]) * ramp_t, len0, prev,
+                    thickness, gain, smoothing, vmax, dt, ratio)
+        return
     for axis in range(2):
         other = 1 - axis
         area = (walls[2 * other + 1] - walls[2 * other]) * thickness
@@ -319,6 +324,54 @@ def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thi
                 walls[wi] += d
             else:
                 walls[wi] -= d
+
+
+@njit(**FAST)
+def _servo_tied(walls, wF, wK, c_target, len0, prev, thickness, gain, smoothing, vmax, dt,
+                ratio):
+    """One step of the tied control: the proportional strain path d eps2 = R d eps1 (R =
+    ``ratio`` < 0) with its conjugate stress c = s1 + R s2 held at ``c_target`` [Pa].
+
+    The tie: each y wall moves inward by d, each x wall by k d with k = R W0 / H0 (len0 =
+    (W0, H0), the reference lengths of the engineering strains), so dU2 = k dU1 and
+    d eps2 = 2 k d / W0 = R (2 d / H0) = R d eps1 at every step (and G below is conjugate to
+    U1 exactly: F1 dU1 + F2 dU2 = (F1 + k F2) dU1).
+    The servo acts on the generalized force G = F1 + R (W/H) F2 = W t c (F1, F2: the mean
+    compressive forces on the two y walls and on the two x walls; W, H the current box): d is
+    gain (G_target - G) / K_G, G_target = W t c_target, clipped to vmax dt and smoothed with
+    the previous d, as the stress servo does.  K_G = dG/dd with the disks held still: each
+    wall's force rises by its contact stiffness times its inward move, so dF1 = k1 d and
+    dF2 = k2 k d (k1, k2 the mean contact stiffness of the y walls and of the x walls), and
+    K_G = k1 + R (W/H) k k2 = k1 + R^2 (W/H) (W0/H0) k2 (= k1 + R^2 (W/H)^2 k2 at the
+    reference shape); the geometric change of R W/H with d is of order F/W, negligible beside
+    the contact stiffnesses.  Like the stress servo's, this stiffness is that of the walls'
+    contacts alone, an upper bound of the specimen's, so the servo never overshoots."""
+    w = walls[1] - walls[0]
+    h = walls[3] - walls[2]
+    a = ratio * w / h
+    g = 0.5 * (wF[2] + wF[3]) + a * 0.5 * (wF[0] + wF[1])
+    err = c_target * w * thickness - g
+    k = ratio * len0[0] / len0[1]
+    kg = 0.5 * (wK[2] + wK[3]) + a * k * 0.5 * (wK[0] + wK[1])
+    lim = vmax * dt
+    if kg > 0.0:
+        d = gain * err / kg
+    else:
+        d = lim if err > 0.0 else -lim     # no wall contact: move towards the target
+    if d > lim:
+        d = lim
+    elif d < -lim:
+        d = -lim
+    d = smoothing * d + (1.0 - smoothing) * prev[2]
+    dx = k * d
+    prev[0] = dx
+    prev[1] = dx
+    prev[2] = d
+    prev[3] = d
+    walls[0] += dx
+    walls[1] -= dx
+    walls[2] += d
+    walls[3] -= d
 
 
 # --------------------------------------------------------------------------------------
@@ -583,7 +636,7 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
             x_ref, walls_ref, disp2, walls, prev, wF, wK,
             mode, s_from, s_to, ramp_start, ramp_len, rate, len0, step0,
             kn, kt, mu, cap_on, beta, kr, mur, damping, dt, thickness, gain, smoothing, vmax,
-            half_skin, nblocks):
+            half_skin, nblocks, ratio=0.0):
     """Run up to nsteps time steps; stop early when the neighbour list must be rebuilt.
 
     Returns the number of steps done.  step0 is the global step counter at entry (the
@@ -591,6 +644,7 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
     ``nblocks``: blocks of disks run concurrently (one per thread; results do not depend on
     it, see ``_block_step``).  One block is the plain serial loop.  Rolling resistance:
     kr = rolling_stiffness * kt [N/m], mur = current rolling friction (0 = off); fnet (N,4).
+    ``ratio``: R of the tied control (mode 2, ``servo_walls``); unused by the other modes.
     """
     hs2 = half_skin * half_skin
     n = x.shape[0]
@@ -620,7 +674,7 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
         else:
             rt = 1.0
         servo_walls(walls, wF, wK, mode, s_from, s_to, rt, rate, len0, prev, thickness,
-                    gain, smoothing, vmax, dt)
+                    gain, smoothing, vmax, dt, ratio)
         done += 1
         rebuild = np.max(dmax) > hs2
         for wi in range(4):

@@ -30,7 +30,7 @@ import numpy as np
 from .settle import HISTORY_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .threads import ThreadChooser
-from .walls import stress_path
+from .walls import TIED, stress_path
 
 
 RELAX_FAIL_STRAIN = 0.01   # a relaxation that moves the walls by 1 % strain has run away
@@ -261,7 +261,8 @@ def state_fingerprint(state: State) -> str:
     fingerprint give the same probe results (the kernels are deterministic).  Without rolling
     resistance (mu_r = 0 and no moment history: the run is then the same to the bit whatever
     ``rolling_stiffness``) the rolling fields are left out, so the fingerprint is the one of
-    the code before rolling resistance existed and earlier checkpoints stay valid."""
+    the code before rolling resistance existed and earlier checkpoints stay valid; so is the
+    tie's ratio of a control that is not tied."""
     rolling = bool(state.params.rolling_friction != 0 or state.mu_r != 0 or np.any(state.mr))
     h = hashlib.sha256()
     for a in (state.x, state.v, state.w, state.theta, state.r, state.walls, state.walls_ref,
@@ -272,8 +273,11 @@ def state_fingerprint(state: State) -> str:
     if not rolling:
         params = {k: v for k, v in params.items()
                   if k not in ("rolling_friction", "rolling_stiffness")}
+    # the tie's ratio only under the tied control (a control of the other modes hashes as
+    # before the field existed)
+    control = list(state.control) if TIED in state.control.mode else list(state.control)[:7]
     h.update(json.dumps([params, state.step, state.mu] + ([state.mu_r] if rolling else [])
-                        + [state.cap_on, list(state.control)], default=str).encode())
+                        + [state.cap_on, control], default=str).encode())
     return h.hexdigest()
 
 

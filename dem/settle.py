@@ -72,8 +72,9 @@ class SettleRule(NamedTuple):
                   ("fail_strain", self.fail_strain > 0, "fail_strain > 0"))
         for name, ok, rng in checks:
             val = getattr(self, name)
-            bad = isinstance(val, float) and (math.isnan(val) or
-                                              (math.isinf(val) and name != "fail_strain"))
+            # inf: no failure by that test (a relaxation's strain ratio, a burst's)
+            bad = isinstance(val, float) and (math.isnan(val) or (
+                math.isinf(val) and name not in ("fail_strain", "fail_ratio")))
             if not ok or bad:
                 raise ValueError(f"{prefix}{name}={val!r}; allowed range: {rng}")
         return self
@@ -117,15 +118,17 @@ def voigt_strain(sim, norm: float) -> float:
 
 
 def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_scale=None,
-           progress=None) -> Settled:
+           progress=None, stress_error=None) -> Settled:
     """Run ``sim`` (its control already set) until equilibrium, failure or ``rule.max_steps``
     (see the module docstring).  ``target_xy``: wall-stress targets (s_xx, s_yy) [Pa];
     ``eps0``: wall strains (eps1, eps2) at the start of the probe (default: now);
     ``de_elastic``: |de| of the elastic probe in the same direction (failure rules);
     ``strain_scale``: the strain scale of the drift test when |de| is not one (relaxation)
     and of the strain ratio when ``de_elastic`` is not given.  ``progress(steps, row)``:
-    called after each check."""
-    target = np.asarray(target_xy, float)
+    called after each check.  ``stress_error(s_xx, s_yy)``: the stress error [Pa] of a control
+    that holds something else than the two wall stresses (``dem.burst``: |c - c_target|; then
+    ``target_xy`` is not used); default max |(s_xx, s_yy) - target_xy|."""
+    target = None if stress_error else np.asarray(target_xy, float)
     e = lambda: sim.strain()[::-1]                      # (eps1, eps2) = (y, x)
     eps0 = e() if eps0 is None else np.asarray(eps0, float)
     w_checks = window_steps(sim.n, rule) // rule.check_every
@@ -137,7 +140,8 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
         sx, sy = sim.wall_stress(snap)
         ub = sim.unbalanced(snap)
         de = e() - eps0
-        err = float(np.max(np.abs(np.array([sx, sy]) - target)))
+        err = (float(stress_error(sx, sy)) if stress_error else
+               float(np.max(np.abs(np.array([sx, sy]) - target))))
         ratio = float(np.linalg.norm(de) / el) if el else math.nan
         hist.append([sim.step, sim.kinetic_energy(), backbone_kinetic_energy(sim, snap), ub,
                      de[0] + eps0[0], de[1] + eps0[1], sy, sx, err, ratio])

@@ -135,7 +135,7 @@ class Simulation:
     def run(self, nsteps: int):
         """Advance nsteps time steps under the current control."""
         p = self.params
-        mode, s_from, s_to, ramp_start, ramp_len, rate, len0 = self.control.arrays()
+        mode, s_from, s_to, ramp_start, ramp_len, rate, len0, ratio = self.control.arrays()
         left = int(nsteps)
         while left > 0:
             pl = self.pairs
@@ -155,7 +155,7 @@ class Simulation:
                 p.rolling_stiffness * p.kt, self.mu_r, self.damping,
                 self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
                 self.vmax_override or p.servo_vmax,
-                0.5 * p.skin, nblocks)
+                0.5 * p.skin, nblocks, ratio)
             self.threads.record(nth, done * self.n, time.perf_counter() - t0)
             left -= done
             self.step += done

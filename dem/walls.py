@@ -2,16 +2,19 @@
 
 A `Control` says, per axis (0 = x walls = lateral = axis 2, 1 = y walls = axial = axis 1),
 whether the walls are stress controlled (servo, YADE TriaxialStressController-like) or
-strain-rate controlled.  Stresses are compression positive [Pa], strain rates compression
-positive [1/s].  The servo itself is `kernels.servo_walls`.
+strain-rate controlled, or, both axes together, tied (``tied``: the proportional strain path
+d eps2 = R d eps1 with the stress conjugate to it, c = s1 + R s2, held by the servo).  Stresses
+are compression positive [Pa], strain rates compression positive [1/s].  The servo itself is
+`kernels.servo_walls`.
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
-STRESS, STRAIN = 0, 1
+STRESS, STRAIN, TIED = 0, 1, 2
 
 
 class Control(NamedTuple):
@@ -22,11 +25,12 @@ class Control(NamedTuple):
     ramp_len: int = 0                     # ramp length in steps (0 = step change)
     rate: tuple = (0.0, 0.0)              # strain rate per axis [1/s], compression > 0
     len0: tuple = (1.0, 1.0)              # reference lengths (W0, H0) for the strain rate [m]
+    ratio: float = 0.0                    # R of the tie d eps2 = R d eps1 (TIED only)
 
     def arrays(self):
         return (np.asarray(self.mode, np.int64), np.asarray(self.s_from, float),
                 np.asarray(self.s_to, float), int(self.ramp_start), int(self.ramp_len),
-                np.asarray(self.rate, float), np.asarray(self.len0, float))
+                np.asarray(self.rate, float), np.asarray(self.len0, float), float(self.ratio))
 
 
 def isotropic(stress, ramp_from=None, step=0, ramp_len=0) -> Control:
@@ -50,6 +54,19 @@ def strain_rate(rate_x, rate_y, len0) -> Control:
     """Both axes strain-rate controlled."""
     return Control((STRAIN, STRAIN), (0.0, 0.0), (0.0, 0.0), 0, 0, (rate_x, rate_y),
                    tuple(len0))
+
+
+def tied(ratio, c_from, c_to, step, ramp_len, len0) -> Control:
+    """The proportional strain path d eps2 = R d eps1 (``ratio`` = R < 0) under the control of
+    its conjugate stress c = s1 + R s2 [Pa], ramped from ``c_from`` to ``c_to`` over ``ramp_len``
+    steps from global step ``step`` (0: a step change): the y walls move to hold c, the x walls
+    follow them, dU2 = R (W0/H0) dU1 with (W0, H0) = ``len0`` the reference lengths of the
+    strains, so that the engineering strains keep d eps2 = R d eps1 at every step
+    (``kernels.servo_walls``).  The targets of c are stored as the y axis's stress targets."""
+    if not (math.isfinite(ratio) and ratio < 0):
+        raise ValueError(f"ratio={ratio!r}; allowed range: ratio < 0 (finite)")
+    return Control((TIED, TIED), (0.0, float(c_from)), (0.0, float(c_to)), int(step),
+                   int(ramp_len), (0.0, 0.0), tuple(len0), float(ratio))
 
 
 def wall_stress(wF, walls, thickness):

@@ -188,8 +188,9 @@ def _fingerprint_before_rolling(state):
         h.update(np.ascontiguousarray(a).tobytes())
     pd = {k: v for k, v in state.params.to_dict().items()
           if k not in ("rolling_friction", "rolling_stiffness")}
-    h.update(json.dumps([pd, state.step, state.mu, state.cap_on, list(state.control)],
-                        default=str).encode())
+    c = state.control      # its seven fields of that time (the tie's ratio came later)
+    ctrl = [c.mode, c.s_from, c.s_to, c.ramp_start, c.ramp_len, c.rate, c.len0]
+    h.update(json.dumps([pd, state.step, state.mu, state.cap_on, ctrl], default=str).encode())
     return h.hexdigest()
 
 

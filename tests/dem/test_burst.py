@@ -1,0 +1,206 @@
+"""The tied control of the burst experiment (``walls.tied``, ``kernels._servo_tied``), its state
+files, the second-order work it records and the peak rule (``dem.burst``), on the 200-disk
+sample of conftest (isotropic, 200 kPa)."""
+import math
+
+import numpy as np
+import pytest
+
+from dem import io, kernels
+from dem.burst import (BurstOptions, below_row, contact_table, contact_work, hold, scan_peak,
+                       wall_work)
+from dem.probes import state_fingerprint
+from dem.simulation import Simulation
+from dem.threads import ThreadChooser
+from dem.walls import TIED, strain_rate, tied
+
+R = -2.0
+
+
+def _sim(state):
+    sim = Simulation(state)
+    sim.threads = ThreadChooser(sim.n, 1)
+    return sim
+
+
+def _reference_away(state):
+    """The state with reference lengths (W0, H0) of another shape than the box (W, H): a tie
+    built on the current W/H instead of W0/H0 would then break d eps2 = R d eps1 by 20 %."""
+    w, h = state.walls[1] - state.walls[0], state.walls[3] - state.walls[2]
+    return state._replace(ref_len=np.array([w, 1.2 * h]))
+
+
+def _c(sim):
+    sx, sy = sim.wall_stress()
+    return sy + R * sx
+
+
+def _tie_error(sim, e0, nsteps, every):
+    """max over checks of |d eps2 - R d eps1| and the round-off bound of the wall positions."""
+    worst, de1 = 0.0, 0.0
+    for _ in range(nsteps // every):
+        sim.run(every)
+        e2, e1 = sim.strain() - e0
+        worst, de1 = max(worst, abs(e2 - R * e1)), e1
+    # each step adds to four wall positions with a rounding of half an ulp of |walls|; a strain
+    # divides their difference by a reference length: 4 roundings a step, twice over, per step
+    ulp = np.spacing(np.abs(sim.walls).max())
+    return worst, de1, 8 * nsteps * ulp / sim.ref_len.min()
+
+
+@pytest.mark.parametrize("control", ["strain_rate", "tied"])
+def test_the_tie_holds_d_eps2_R_d_eps1_to_round_off(small_sample, control):
+    sim = _sim(_reference_away(small_sample))
+    e0 = sim.strain()
+    if control == "strain_rate":       # the kinematic path: both axes at rates R r and r
+        sim.set_control(strain_rate(R * 0.05, 0.05, sim.ref_len))
+    else:                               # the servo holding c 5 kPa above its value
+        c = _c(sim) + 5e3
+        sim.set_control(tied(R, c, c, sim.step, 0, sim.ref_len))
+    worst, de1, bound = _tie_error(sim, e0, 3000, 100)
+    assert de1 > 1e-6                   # the walls moved: 1e-6 of strain and more
+    assert worst <= bound, (worst, bound)
+    assert bound < 1e-4 * de1           # round-off, far below the tie's own size
+
+
+def test_the_servo_stiffness_is_dG_dU_of_the_wall_contacts(small_sample):
+    # K_G = k1 + R (W/H) k k2 (kernels._servo_tied): with gain 1 and no smoothing, one servo
+    # step moves the walls so that G = F1 + R (W/H) F2 reaches its target to first order while
+    # the disks stand still. The second-order rest is the change of R W/H with the walls
+    # (relative ~ F2 / (K_G W) ~ 1e-3 here), so within 1 % of the error.
+    sim = _sim(_reference_away(small_sample))
+    p = sim.params
+
+    def g_of(walls):
+        wF, wK = np.zeros(4), np.zeros(4)
+        kernels.wall_forces(sim.x, sim.v, sim.r, sim.m, walls, sim.pairs.cand_off,
+                            sim.pairs.cand, np.zeros((sim.n, 2)), p.kn, 0.0, wF, wK)
+        w, h = walls[1] - walls[0], walls[3] - walls[2]
+        return 0.5 * (wF[2] + wF[3]) + R * w / h * 0.5 * (wF[0] + wF[1]), w, wF, wK
+
+    walls = sim.walls.copy()
+    g0, w0, wF, wK = g_of(walls)
+    c_target = (g0 + 30.0) / (w0 * p.thickness)        # 30 N above: no contact opens or closes
+    prev = np.zeros(4)
+    kernels.servo_walls(walls, wF, wK, np.array([TIED, TIED]), np.zeros(2),
+                        np.array([0.0, c_target]), 1.0, np.zeros(2), sim.ref_len, prev,
+                        p.thickness, 1.0, 1.0, 1.0, p.dt, R)
+    g1, w1, _, _ = g_of(walls)
+    assert abs(g1 - c_target * w1 * p.thickness) < 0.01 * 30.0
+    # and with R^2 dropped from the stiffness (the x walls' share) it would not
+    k1, k2 = 0.5 * (wK[2] + wK[3]), 0.5 * (wK[0] + wK[1])
+    assert R * R * k2 * (w0 / (sim.walls[3] - sim.walls[2])) > 0.1 * k1
+
+
+def test_the_c_servo_holds_c_on_a_stable_state(small_sample):
+    # the isotropic state is far from any peak: c held 1 kPa above its value settles, with
+    # |c - c_target| within the rule's 25 Pa and the tie kept
+    sim = _sim(small_sample)
+    c0 = _c(sim)
+    opts = BurstOptions(max_steps=200_000)
+    res = hold(small_sample, R, c0 + 1e3, opts, threads=1)
+    assert res.outcome == "equilibrium", res.outcome
+    h = res.history
+    assert abs(h[-1, 4] - (c0 + 1e3)) <= opts.stress_tol
+    assert h[-1, 6] <= opts.stress_tol
+    de1, de2 = h[-1, 2] - h[0, 2], h[-1, 3] - h[0, 3]
+    assert de1 > 0 and abs(de2 - R * de1) < 1e-6 * abs(de1)      # the tie kept (round-off: above)
+
+
+def test_the_contact_sum_is_the_walls_less_the_unbalanced_term(small_sample):
+    # paper Eq. 14 (secant): sum_c df . dl over the grain and wall contacts equals the walls'
+    # second-order work sum_w dF_w dU_w less sum_p dF_p . dx_p, to round-off, also when contacts
+    # open and close (a c-controlled run with a 5 kPa step)
+    sim = _sim(small_sample)
+
+    def net(s):
+        sn = s.snapshot()
+        return kernels.net_forces(s.n, s.x, sn.ci, sn.cj, sn.fx, sn.fy, sn.wp, sn.ww, sn.wf)
+
+    snap = sim.snapshot()
+    t0 = contact_table(sim)
+    g0, walls0, x0, f0 = (np.bincount(snap.ww, weights=snap.wf, minlength=4), sim.walls.copy(),
+                          sim.x.copy(), net(sim))
+    c = _c(sim) + 5e3
+    sim.set_control(tied(R, c, c, sim.step, 0, sim.ref_len))
+    sim.run(4000)
+    t1 = contact_table(sim)
+    assert len(np.setxor1d(t0.keys, t1.keys)) > 0            # contacts changed
+    cw, ww = contact_work(t0, t1), wall_work(sim, g0, walls0)
+    unb = float(np.sum((net(sim) - f0) * (sim.x - x0)))
+    assert abs(cw) > 1e-3
+    assert abs(cw - (ww - unb)) <= 1e-10 * (abs(cw) + abs(ww) + abs(unb))
+
+
+def test_tied_state_files_round_trip_and_older_files_load(small_sample, tmp_path):
+    sim = _sim(small_sample)
+    c = _c(sim) + 1e3
+    sim.set_control(tied(R, c, c, sim.step, 0, sim.ref_len))
+    sim.run(500)
+    st = sim.state()
+    io.save_state(tmp_path / "t.npz", st)
+    back, _ = io.load_state(tmp_path / "t.npz")
+    assert back.control == st.control and back.control.ratio == R
+    a, b = _sim(st), _sim(back)
+    a.run(800)
+    b.run(800)
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.walls, b.walls)
+    # a version-2 file (before the tie: no ctrl_ratio) loads with ratio 0 and runs as before
+    io.save_state(tmp_path / "s.npz", small_sample)
+    with np.load(tmp_path / "s.npz") as z:
+        d = {k: z[k] for k in z.files if k != "ctrl_ratio"}
+    d["format_version"] = np.array(2)
+    np.savez(tmp_path / "v2.npz", **d)
+    old, _ = io.load_state(tmp_path / "v2.npz")
+    assert old.control == small_sample.control and old.control.ratio == 0.0
+    assert state_fingerprint(old) == state_fingerprint(small_sample)
+    # the tie's ratio counts in the fingerprint of a tied control only
+    assert state_fingerprint(st) != state_fingerprint(st._replace(
+        control=st.control._replace(ratio=-1.5)))
+    d["format_version"] = np.array(3)                      # version 3 must carry it
+    np.savez(tmp_path / "bad.npz", **d)
+    with pytest.raises(ValueError, match="ctrl_ratio"):
+        io.load_state(tmp_path / "bad.npz")
+
+
+def test_a_tie_needs_a_negative_finite_ratio():
+    for bad in (0.0, 0.5, math.nan, -math.inf):
+        with pytest.raises(ValueError, match="ratio"):
+            tied(bad, 0.0, 0.0, 0, 0, (1.0, 1.0))
+
+
+def test_the_peak_rule_on_noisy_c():
+    # c rises with stick-slip drops of 5 kPa, peaks at 80 kPa, then falls: the slips do not
+    # confirm a peak, the fall of peak_drop (10 kPa here) does, and below is the first record
+    # at half the rise
+    opts = BurstOptions(peak_drop=10e3, peak_strain=2.5e-3)
+    e = np.arange(600) * 1e-5
+    c = 60e3 + 20e3 * np.sin(np.minimum(e / 2e-3, 1.0) * math.pi / 2) - 30e3 * np.maximum(e - 2e-3, 0) / 1e-3
+    for k in (50, 120, 170):                              # slips of 5 kPa on the way up
+        c[k:k + 3] -= 5e3
+    peak, how, stop = scan_peak(c, e, opts)
+    assert peak == int(np.argmax(c)) and how == "drop"
+    assert c[peak] - c[stop] >= opts.peak_drop > c[peak] - c[stop - 1]
+    kb = below_row(c, peak, 0.5)
+    assert c[kb] >= 70e3 > c[kb - 1]
+    # a plateau that never falls by peak_drop is confirmed by the strain beyond it
+    flat = np.minimum(c, 79e3)
+    flat[200:] = 78e3
+    peak, how, stop = scan_peak(flat, e, opts)
+    assert how == "strain" and e[stop] - e[peak] >= opts.peak_strain
+    # a rise to the end of the path: no peak
+    assert scan_peak(np.linspace(0, 1e4, 50), e[:50], opts)[1] == ""
+
+
+def test_the_tied_control_does_not_depend_on_the_thread_split(small_sample):
+    # the servo runs after the blocks, on the summed wall forces: 1 and 3 blocks, the same bits
+    runs = []
+    for nblocks in (1, 3):
+        sim = _sim(small_sample)
+        sim.nblocks = nblocks
+        c = _c(sim) + 5e3
+        sim.set_control(tied(R, c, c, sim.step, 0, sim.ref_len))
+        sim.run(1500)
+        runs.append(sim.state())
+    a, b = runs
+    assert all(np.array_equal(x, y) for x, y in zip(a[1:15], b[1:15]))

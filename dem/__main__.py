@@ -236,7 +236,8 @@ def cmd_crosscheck(a):
                                 workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
                                 dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
                                 dem_domain=a.dem_domain, dem_params=a.dem_params,
-                                scheduler=a.scheduler)
+                                scheduler=a.scheduler, burst=not a.no_burst,
+                                burst_ratios=a.burst_ratios, burst_fractions=a.burst_fractions)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
@@ -454,6 +455,14 @@ def build_parser() -> opt.Parser:
     x.add_argument("--dem-domain", action=argparse.BooleanOptionalAction, default=None,
                     help="directional analyses at every saved DEM state (the DEM's bifurcation "
                          "domain); default: on, off with --full (use `dem domain` there)")
+    x.add_argument("--no-burst", action="store_true",
+                   help="skip the burst section (proportional strain paths, c held below / past "
+                        "its peak, in the three parts: docs/burst.md)")
+    x.add_argument("--burst-ratios", type=opt.reals(unit="-"), default=None,
+                   help="R of the burst section's paths, each finite and < 0 (default -2)")
+    x.add_argument("--burst-fractions", type=opt.reals(0, 1), default=None,
+                   help="start states of the burst section, fractions of each part's drained "
+                        "peak eta, 0 < f < 1, among the DEM's saved ones (default 0.90)")
     x.set_defaults(func=cmd_crosscheck)
     return ap
 
@@ -476,6 +485,15 @@ def main(argv=None):
         if getattr(a, "state", None):
             from . import io
             io.load_state(a.state)    # a missing or foreign state file, before the compilation
+        if a.cmd == "crosscheck" and not a.no_burst:
+            from .burst import check_ratio
+            from .experiment import SAVE_FRACTIONS
+            for r in a.burst_ratios or ():
+                check_ratio(r, "--burst-ratios")
+            bad = [f for f in a.burst_fractions or () if f not in SAVE_FRACTIONS]
+            if bad and not a.skip_dem:
+                raise opt.OptionError(f"--burst-fractions {bad}: allowed fractions the DEM's "
+                                      f"biaxial test saves, {list(SAVE_FRACTIONS)}")
         if a.cmd == "burst":
             from .burst import load_starts
             _burst_options(a)         # bad options and input files before the compilation

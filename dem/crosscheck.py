@@ -580,6 +580,9 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
         else:
             L.append("\n**Which eta for the DEM's A.** eta = 1.029 with p = (s1 + 2 s2)/3 is not "
                      "reached either.")
+    if c.get("burst"):
+        from .crosscheck_burst import burst_report_lines
+        L += [""] + burst_report_lines(c["burst"], figs.get("burst"))
     L += ["", "## Wall times", ""] + [f"- {k}: {v:.1f} s" for k, v in timings.items()] + [""]
     with atomic_open(os.path.join(out, "report.md")) as f:
         f.write("\n".join(L))
@@ -588,7 +591,8 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
 def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None, skip_dem=False,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
                    dem_max_steps=None, threads=None, resume=False, dem_domain=None,
-                   dem_params=None, scheduler=None):
+                   dem_params=None, scheduler=None, burst=True, burst_ratios=None,
+                   burst_fractions=None):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
@@ -600,6 +604,9 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     for the DEM sample (default: the paper's stated set); the report names it.
     ``scheduler``: the address of a dask.distributed scheduler for the DEM's relaxations and
     probe runs (see ``dem_part``; the H-model's domain stays in local processes).
+    ``burst``: the burst section (``dem.crosscheck_burst``): the proportional strain paths of
+    ``burst_ratios`` (default -2) from ``burst_fractions`` (default 0.90) of each part's drained
+    peak, c held below and past its peak, in the H-model, the FE specimen and the DEM sample.
     """
     from hmodel.io import atomic_open
 
@@ -641,8 +648,23 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
                 f"{n_runs} probe runs)"] = time.time() - t
         for k, v in dem["stage_times"].items():
             timings[f"  DEM {k}"] = v
+    bparts = None
+    if burst:
+        from . import crosscheck_burst as cb
+        t = time.time()
+        bparts = cb.burst_part(out_dir, os.path.join(out_dir, "dem", "biaxial") if dem else None,
+                               ratios=tuple(burst_ratios or cb.BURST_RATIOS),
+                               fractions=tuple(burst_fractions or cb.BURST_FRACTIONS),
+                               fem_mesh=fem_mesh, fem_n_dir=fem_n_dir, dem_rate=rate,
+                               workers=workers, log=_log)
+        timings["burst (H-model, FE, DEM)"] = time.time() - t
     c = conclusions(h, dem["probes"] if dem else None, fem, dem)
     figs = _figures(out_dir, h, dem, fem)
+    if bparts:
+        d200 = [d for d in c["domain"] if abs(d["sigma2"] - 200e3) < 1.0]
+        c["burst"] = cb.burst_conclusions(bparts, d200[0]["eta_w2"] if d200 else None,
+                                          (fem["summary"] or {}).get("events"))
+        figs["burst"] = cb.burst_figure(out_dir, bparts)
     config = {"full": full, "dem_n": n, "dem_seed": seed, "dem_rate": rate,
               "dem_params": (os.path.abspath(dem_params) if dem_params else
                              "the paper's stated set (kn/D 32 GPa, kt/kn 0.42, 35 deg)"),

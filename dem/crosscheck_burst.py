@@ -1,0 +1,229 @@
+"""The cross-check's burst section: failure made to happen in the three parts side by side
+(docs/burst.md, paper Eq. 1).
+
+For each ratio R and start fraction f, the material point (``hmodel.burst``), the FE perfect
+specimen (``fem.burst``) and the DEM sample of the cross-check (``dem.burst``, from the states its
+biaxial test saved) follow the proportional strain path d eps2 = R d eps1, find where
+c = s1 + R s2 peaks (W2 = 0 along the path), and hold c below and past that peak. The section
+states, with the run's numbers, whether each part failed exactly where W2 vanished along the path
+(below: equilibrium, past: failure), and how the c peaks compare with the first W2 = 0 of the
+H-model's directional analysis and with the FE's first lam_min(K_s) <= 0 on the drained path.
+
+Like ``dem.crosscheck``, the one place of ``dem`` that imports ``hmodel`` and ``fem`` (lazily).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+__all__ = ["burst_part", "burst_conclusions", "burst_figure", "burst_report_lines",
+           "BURST_RATIOS", "BURST_FRACTIONS"]
+
+BURST_RATIOS = (-2.0,)
+BURST_FRACTIONS = (0.90,)
+PARTS = ("hmodel", "fem", "dem")
+LABEL = {"hmodel": "material point (H-model)", "fem": "FE perfect specimen", "dem": "DEM sample"}
+
+
+def _csv_histories(path, ke_key, volume):
+    """history.csv of a burst run -> [{ratio, start_fraction, switch, t [s], ke_density [J/m^3]}],
+    one per run, ``ke_key`` the kinetic energy column, divided by ``volume``."""
+    import csv
+    runs = {}
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            key = (float(r["ratio"]), float(r["start_fraction"]), r["switch"])
+            h = runs.setdefault(key, {"t": [], "ke": []})
+            h["t"].append(float(r["t"]))
+            h["ke"].append(float(r[ke_key]))
+    return [{"ratio": k[0], "start_fraction": k[1], "switch": k[2], "t": np.array(v["t"]),
+             "ke_density": np.array(v["ke"]) / volume} for k, v in runs.items()]
+
+
+def _rows(rows, keys=("ratio", "start_fraction", "switch", "eta_start", "eta_peak_c",
+                      "fraction_peak_c", "c_peak", "c_switch", "dc", "outcome", "ke_growth")):
+    return [{k: (r.get(k) if not isinstance(r.get(k), np.generic) else r.get(k).item())
+             for k in keys} for r in rows]
+
+
+def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BURST_FRACTIONS,
+               fem_mesh=(4, 8), fem_n_dir=72, dem_rate=0.01, workers=None, log=print) -> dict:
+    """Run the three parts' burst experiments into ``out_dir``/burst/{hmodel,fem,dem}.
+    ``dem_biaxial_dir``: a ``dem biaxial`` folder with its states (None: no DEM part).
+    Returns {part: {"rows": burst rows (dicts), "histories": E_c per volume against time,
+    "eta_peak": the part's drained peak eta}}."""
+    from hmodel import HParams
+    from hmodel import burst as hb
+    from fem.biaxial import BiaxialConfig
+    from fem.burst import BurstConfig, run_burst as fem_burst
+
+    out = {}
+    P = HParams()
+    sp = hb.Specimen()
+    log(f"burst: material point, R {list(ratios)}, start fractions {list(fractions)}")
+    h = hb.run_burst(P, ratios, fractions, 1e-4 * P.p0, sp)
+    area = sp.width * sp.height
+    out["hmodel"] = {"rows": _rows(h.rows), "eta_peak": h.eta_peak,
+                     "histories": [{"ratio": x["ratio"], "start_fraction": x["start_fraction"],
+                                    "switch": x["switch"], "t": x["t"], "ke_density": x["ke"] / area}
+                                   for x in h.histories]}
+    log(f"burst: FE specimen {fem_mesh[0]} x {fem_mesh[1]}, n_dir {fem_n_dir}")
+    fdir = os.path.join(out_dir, "burst", "fem")
+    cfg = BurstConfig(specimen=BiaxialConfig(nx=fem_mesh[0], ny=fem_mesh[1], n_dir=fem_n_dir,
+                                             fields=False),
+                      ratios=tuple(ratios), start_fractions=tuple(fractions), fields=False)
+    f = fem_burst(cfg, fdir)
+    fb = cfg.specimen
+    out["fem"] = {"rows": _rows(f.rows), "eta_peak": f.summary["material_point_drained_peak"]["eta"],
+                  "histories": _csv_histories(os.path.join(fdir, "history.csv"), "ke",
+                                              fb.width * fb.height)}
+    if dem_biaxial_dir is not None:
+        from . import io
+        from .burst import BurstOptions, run_burst as dem_burst
+        log(f"burst: DEM sample of {dem_biaxial_dir}")
+        ddir = os.path.join(out_dir, "burst", "dem")
+        rows, summ = dem_burst(dem_biaxial_dir, ddir, list(ratios), list(fractions),
+                               BurstOptions(rate=dem_rate), workers=workers, verbose=True)
+        st, _ = io.load_state(os.path.join(dem_biaxial_dir, "states", f"state_f{fractions[0]:.3f}.npz"))
+        vol = (st.walls[1] - st.walls[0]) * (st.walls[3] - st.walls[2]) * st.params.thickness
+        out["dem"] = {"rows": _rows(rows), "eta_peak": summ["drained_eta_peak"],
+                      "histories": _csv_histories(os.path.join(ddir, "history.csv"),
+                                                  "ke_backbone", vol)}
+    return out
+
+
+def burst_conclusions(parts: dict, eta_first_w2: float | None, fem_events: dict | None) -> dict:
+    """Per part, ratio and start fraction: the c peak (eta, fraction of the part's drained peak),
+    the outcome of each switch, and ``at_w2_zero``: below settled and past failed (the burst came
+    exactly where W2 vanished along the path, within the switches' resolution). With the H-model's
+    first W2 = 0 of the drained path (``eta_first_w2``) and the FE's first lam_min(K_s) <= 0
+    (``fem_events``: fem_part's events summary)."""
+    c = {"parts": {}, "eta_first_w2": eta_first_w2, "eta_fem_lam_ks": None}
+    ev = (fem_events or {}).get("lam_min_ks") or {}
+    if ev.get("row") is not None:
+        c["eta_fem_lam_ks"] = ev.get("eta")
+    for name, p in parts.items():
+        paths = {}
+        for r in p["rows"]:
+            key = (r["ratio"], r["start_fraction"])
+            d = paths.setdefault(key, {"ratio": r["ratio"], "start_fraction": r["start_fraction"],
+                                       "eta_start": r["eta_start"], "eta_peak_c": r["eta_peak_c"],
+                                       "fraction_peak_c": r["fraction_peak_c"], "outcomes": {},
+                                       "ke_growth_past": None})
+            d["outcomes"][r["switch"]] = r["outcome"]
+            if r["switch"] == "past":
+                d["ke_growth_past"] = r["ke_growth"]
+        for d in paths.values():
+            o = d["outcomes"]
+            d["peaked"] = bool(d["eta_peak_c"] is not None and np.isfinite(d["eta_peak_c"]))
+            d["at_w2_zero"] = bool(d["peaked"] and o.get("below") == "equilibrium"
+                                   and o.get("past") == "failure")
+            d["undecided"] = sum(v == "undecided" for v in o.values())
+        c["parts"][name] = {"eta_peak": p["eta_peak"], "paths": list(paths.values())}
+    return c
+
+
+def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
+    """E_c per volume [J/m^3] against the time since the switch [s], log axes, the three parts on
+    one figure (colour: part; solid: past, dashed: below; the end marked by the outcome)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from hmodel.io import save_figure
+    color = {"hmodel": "C0", "fem": "C1", "dem": "C3"}
+    fig, ax = plt.subplots(figsize=(7.5, 5))
+    for part, p in parts.items():
+        first = True
+        for h in p["histories"]:
+            t, ke = np.asarray(h["t"]), np.asarray(h["ke_density"])
+            ok = (t > 0) & (ke > 0)
+            if not ok.any():
+                continue
+            lab = (f"{LABEL[part]}" if first else None)
+            first = False
+            ax.loglog(t[ok], ke[ok], "-" if h["switch"] == "past" else "--", color=color[part],
+                      lw=1.1, label=lab)
+            row = next((r for r in p["rows"] if (r["ratio"], r["start_fraction"], r["switch"])
+                        == (h["ratio"], h["start_fraction"], h["switch"])), None)
+            if row is not None:
+                ax.plot(t[ok][-1], ke[ok][-1], "x" if row["outcome"] == "failure" else "o",
+                        color=color[part], ms=7)
+    ax.plot([], [], "k-", label="past the c peak (burst expected)")
+    ax.plot([], [], "k--", label="below the c peak (equilibrium expected)")
+    ax.plot([], [], "kx", ls="none", label="end: failure")
+    ax.plot([], [], "ko", ls="none", label="end: equilibrium")
+    ax.set_xlabel("time since the switch to c control [s]")
+    ax.set_ylabel(r"kinetic energy per volume $E_c/V$ [J/m$^3$] (DEM: disks with >= 2 contacts)")
+    ax.set_title("The burst of kinetic energy (Eq. 1): c = s1 + R s2 held below / past its peak")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7)
+    save_figure(fig, os.path.join(out, name))
+    return name
+
+
+def burst_report_lines(c: dict, fig: str | None) -> list:
+    """The report's burst section: per ratio and start fraction, each part's c peak and switch
+    outcomes, then the verdict with its numbers."""
+    L = ["## Failure made to happen: the proportional strain path and the burst (Eq. 1)", "",
+         "From the drained state at f of each part's drained peak eta, the path d eps2 = R d eps1 "
+         "under strain control until c = s1 + R s2 peaks (W2 = d eps1 dc = 0 there), then c held "
+         "below the peak (`below`) and past it (`past`) with the tie kept (docs/burst.md).", ""]
+    if fig:
+        L += [f"![burst]({fig})", ""]
+    L += ["| part | R | f | eta_start | eta of the c peak (fraction of the drained peak) | below | "
+          "past | E_c growth past |", "|---|---|---|---|---|---|---|---|"]
+    fmt = lambda x, s: "-" if x is None or not np.isfinite(x) else format(x, s)
+    for name, p in c["parts"].items():
+        for d in p["paths"]:
+            o = d["outcomes"]
+            L.append(f"| {LABEL[name]} | {d['ratio']:g} | {d['start_fraction']:g} | "
+                     f"{d['eta_start']:.4f} | {fmt(d['eta_peak_c'], '.4f')} "
+                     f"({fmt(d['fraction_peak_c'], '.3f')}) | {o.get('below', '-')} | "
+                     f"{o.get('past', '-')} | {fmt(d['ke_growth_past'], '.3g')} |")
+    L.append("")
+    exact = {n: all(d["at_w2_zero"] for d in p["paths"] if d["peaked"]) and
+             any(d["peaked"] for d in p["paths"]) for n, p in c["parts"].items()}
+    und = sum(d["undecided"] for p in c["parts"].values() for d in p["paths"])
+    s = ("**Where failure came.** " + "; ".join(
+        f"{LABEL[n]}: " + ("below settled and past failed on every path that peaked: failure came "
+                           "exactly where W2 vanished along the path" if ok else
+                           "not on every path (see the table)") for n, ok in exact.items())
+         + f"; {und} run(s) undecided.")
+    L.append(s)
+    hm = c["parts"].get("hmodel")
+    if hm and c["eta_first_w2"] is not None:
+        pk = [d for d in hm["paths"] if d["peaked"]]
+        s = (f"\n**Against the directional analysis and the FE's K_s.** The H-model's first W2 = 0 "
+             f"on the drained path is at eta = {c['eta_first_w2']:.4f}")
+        if c["eta_fem_lam_ks"] is not None:
+            s += f", the FE's first lam_min(K_s) <= 0 at eta = {c['eta_fem_lam_ks']:.4f}"
+        s += ("; the material point's c peaks at " + ", ".join(
+            f"eta = {d['eta_peak_c']:.4f} (R = {d['ratio']:g}, from f = {d['start_fraction']:g}: "
+            f"{d['eta_peak_c'] - c['eta_first_w2']:+.4f} from the first W2 = 0)" for d in pk)
+            + ". The proportional path's own history moves the state a little past the drained "
+            "path's boundary before c turns (docs/burst.md: R = -2 is inside the cone of strain "
+            "directions at the first W2 = 0; other R peak later).") if pk else "."
+        L.append(s)
+    fe, dm = c["parts"].get("fem"), c["parts"].get("dem")
+    if fe and hm:
+        pairs = [(a, b) for a in hm["paths"] for b in fe["paths"]
+                 if (a["ratio"], a["start_fraction"]) == (b["ratio"], b["start_fraction"])
+                 and a["peaked"] and b["peaked"]]
+        if pairs:
+            L.append("\n**FE against the material point.** " + "; ".join(
+                f"R = {a['ratio']:g}, f = {a['start_fraction']:g}: c peak at eta {b['eta_peak_c']:.4f} "
+                f"(FE, its material with n_dir of the cross-check) and {a['eta_peak_c']:.4f} "
+                f"(material point, Table I)" for a, b in pairs) + ".")
+    if dm:
+        L.append("\n**DEM.** " + "; ".join(
+            f"R = {d['ratio']:g}, f = {d['start_fraction']:g}: "
+            + (f"c peaks at {d['fraction_peak_c']:.3f} of the DEM's drained peak (H-model "
+               + ", ".join(f"{a['fraction_peak_c']:.3f}" for a in (hm or {"paths": []})["paths"]
+                           if (a["ratio"], a["start_fraction"]) == (d["ratio"], d["start_fraction"])
+                           and a["peaked"])
+               + f"); below {d['outcomes'].get('below', '-')}, past {d['outcomes'].get('past', '-')}"
+               if d["peaked"] else "c does not peak within the path")
+            for d in dm["paths"]) + ". The DEM's below switch is at half of the rise (docs/burst.md: "
+            "under strain control at the test's rate c stands above what the sample holds).")
+    return L + [""]

@@ -134,16 +134,14 @@ def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
     color = {"hmodel": "C0", "fem": "C1", "dem": "C3"}
     fig, ax = plt.subplots(figsize=(7.5, 5))
     for part, p in parts.items():
-        first = True
+        ax.plot([], [], "-", color=color[part], label=LABEL[part])
         for h in p["histories"]:
             t, ke = np.asarray(h["t"]), np.asarray(h["ke_density"])
             ok = (t > 0) & (ke > 0)
             if not ok.any():
                 continue
-            lab = (f"{LABEL[part]}" if first else None)
-            first = False
             ax.loglog(t[ok], ke[ok], "-" if h["switch"] == "past" else "--", color=color[part],
-                      lw=1.1, label=lab)
+                      lw=1.1)
             row = next((r for r in p["rows"] if (r["ratio"], r["start_fraction"], r["switch"])
                         == (h["ratio"], h["start_fraction"], h["switch"])), None)
             if row is not None:
@@ -154,8 +152,10 @@ def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
     ax.plot([], [], "kx", ls="none", label="end: failure")
     ax.plot([], [], "ko", ls="none", label="end: equilibrium")
     ax.set_xlabel("time since the switch to c control [s]")
-    ax.set_ylabel(r"kinetic energy per volume $E_c/V$ [J/m$^3$] (DEM: disks with >= 2 contacts)")
-    ax.set_title("The burst of kinetic energy (Eq. 1): c = s1 + R s2 held below / past its peak")
+    ax.set_ylabel(r"kinetic energy per volume $E_c/V$ [J/m$^3$]")
+    ax.set_title("The burst of kinetic energy (Eq. 1): c = s1 + R s2 held below / past its peak\n"
+                 "(DEM: the disks with two contacts or more, moving at the path's rate at the switch)",
+                 fontsize=9)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
     save_figure(fig, os.path.join(out, name))

@@ -18,7 +18,7 @@ from hmodel.driver import (MixedControl, drained_biaxial, mixed_step, proportion
 from hmodel.experiment import state_at_eta
 from hmodel.material import to_voigt
 
-ETA_PEAK = 1.0341     # drained peak of Table I at 200 kPa, d eps1 = 1e-5 (README)
+ETA_PEAK = 1.0341     # drained peak of Table I at 200 kPa, d eps1 = 1e-5 (docs/hmodel.md, docs/burst.md)
 
 
 @pytest.fixture(scope="module")

@@ -48,6 +48,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from hmodel.burst import check_ratio
+
 from .settle import SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .threads import ThreadChooser
@@ -115,19 +117,6 @@ class BurstOptions(NamedTuple):
         return SettleRule(self.unbalanced_tol, self.stress_tol, self.strain_tol, self.ke_tol,
                           self.window, self.check_every, self.runaway_ratio, math.inf,
                           self.max_steps, self.runaway_stress, self.fail_strain)
-
-
-def check_ratio(ratio: float, option="--ratios") -> float:
-    """R of a proportional path, or a ValueError naming ``option`` (if any) and the allowed
-    range."""
-    if not math.isfinite(ratio) or ratio >= 0:
-        why = ("R = 0 is the oedometric path (no lateral strain)" if ratio == 0 else
-               "R > 0 compresses both axes, a contractant path along which c = s1 + R s2 hardens"
-               if ratio > 0 else "R must be finite")
-        raise ValueError(f"{option + ' ' if option else ''}{ratio!r}: {why}; allowed range: "
-                         "R < 0 (lateral extension, the dilatant paths along which c can peak; "
-                         "-1 is isochoric)")
-    return float(ratio)
 
 
 def confirm_peak(c, eps1, c_peak, eps1_peak, opts: BurstOptions) -> str:

@@ -35,7 +35,7 @@ from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
 from .output import CurveWriter, FieldWriter, cell_tensor, nodal_vector, plot_mode
-from hmodel.burst import CPeak
+from hmodel.burst import CPeak, check_ratio
 
 from .reference import material_point_curve, material_point_path
 from .solver import LoadStepper
@@ -100,10 +100,7 @@ class BurstConfig:
         if not self.ratios:
             bad("--ratios", self.ratios, "one or more ratios R")
         for r in self.ratios:
-            if not (isinstance(r, (int, float)) and math.isfinite(r) and r < 0):
-                bad("--ratios", r, "a finite R < 0 (lateral extension; for R >= 0 the "
-                    "specimen is compressed laterally too and c = s1 + R s2 only rises: no peak, "
-                    "no burst)")
+            check_ratio(r)
         if not self.start_fractions:
             bad("--start-fractions", self.start_fractions, "one or more fractions")
         for f in self.start_fractions:

@@ -35,7 +35,7 @@ from .experiment import DOMAIN_EPS1_MAX, biaxial_test, state_at_eta
 from .material import HState, broadcast_state, to_voigt, update, update_full
 from .params import HParams
 
-__all__ = ["Specimen", "Dynamics", "PathInfo", "HoldResult", "conjugate_stress", "path_direction",
+__all__ = ["check_ratio", "Specimen", "Dynamics", "PathInfo", "HoldResult", "conjugate_stress", "path_direction",
            "drained_peak_eta", "proportional_path", "CPeak", "static_check", "hold", "run_burst",
            "BurstResult", "BELOW_RISE", "cone_entries", "cone_at", "BURST_COLUMNS", "HISTORY_COLUMNS",
            "PATH_COLUMNS"]
@@ -99,10 +99,18 @@ def path_direction(ratio: float) -> float:
     return float(np.degrees(np.arctan2(ratio, 1.0)) % 360.0)
 
 
-def _check_ratio(ratio):
-    if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and ratio < 0):
-        raise ValueError(f"ratio = {ratio!r} is out of range: allowed a finite R < 0 (lateral "
-                         "extension; R >= 0 compresses both ways: no peak of c to pass)")
+def check_ratio(ratio: float, option: str | None = "--ratios") -> float:
+    """R of a proportional path, or a ValueError naming ``option`` (if any) and the allowed
+    range: R < 0 (the burst commands of the three parts and the cross-check share it)."""
+    if isinstance(ratio, bool) or not isinstance(ratio, (int, float, np.floating)) \
+            or not math.isfinite(ratio) or ratio >= 0:
+        why = ("R = 0 is the oedometric path (no lateral strain)" if ratio == 0 else
+               "R > 0 compresses both axes, a contractant path along which c = s1 + R s2 hardens"
+               if isinstance(ratio, (int, float)) and ratio > 0 else "R must be a finite number")
+        raise ValueError(f"{option + ' ' if option else ''}{ratio!r}: {why}; allowed range: "
+                         "R < 0 (lateral extension, the dilatant paths along which c can peak; "
+                         "-1 is isochoric)")
+    return float(ratio)
 
 
 def drained_peak_eta(params: HParams, d_eps1: float = 1e-5, eps1_max: float = 0.05) -> tuple:
@@ -169,7 +177,7 @@ def proportional_path(state: HState, params: HParams, ratio: float, d_eps1: floa
     """The proportional strain path d eps2 = R d eps1 from ``state`` under strain control, steps
     d_eps1, until c has peaked (``CPeak``) or eps1 = path_strain (counted from the state).
     Returns (PathResult, CPeak)."""
-    _check_ratio(ratio)
+    check_ratio(ratio, None)
     s0 = to_voigt(state.stress)[0]
     peak = CPeak(s0[0] + ratio * s0[1])
     n = max(1, int(round(path_strain / d_eps1)))
@@ -271,7 +279,7 @@ def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch
     (for the history's strains). Newton stops at |residual| <= rtol x B (|s1| + |R s2|) [N/m]
     (the scale of the round-off of B c): the energy balance's residual per step is the Newton
     residual times dU1."""
-    _check_ratio(ratio)
+    check_ratio(ratio, None)
     specimen.validate()
     dynamics.validate()
     B, H = specimen.width, specimen.height
@@ -379,7 +387,7 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
     taking one line of text."""
     t0 = time.perf_counter()
     for R in ratios:
-        _check_ratio(R)
+        check_ratio(R, None)
     fr = [float(f) for f in start_fractions]
     if any(not (0 < f < 1) for f in fr):
         raise ValueError(f"start fractions {fr} out of range: allowed 0 < f < 1 of the drained peak eta")

@@ -187,11 +187,11 @@ def cmd_burst(args, stage):
         args.dc = 1e-4 * args.sigma2
     try:
         for R in args.ratios:
-            burst._check_ratio(R)
+            burst.check_ratio(R)
         spec = burst.Specimen(args.width, args.height, args.density).validate()
         dyn = burst.Dynamics(args.damping_ratio, args.steps_per_period).validate()
     except ValueError as e:
-        raise opt.OptionError(str(e).replace("ratio =", "--ratios:", 1)) from None
+        raise opt.OptionError(str(e)) from None
     if args.d_eps1 > args.path_strain:
         raise opt.OptionError(f"--d-eps1 {args.d_eps1:g} is out of range: allowed 0 < value <= "
                               f"--path-strain {args.path_strain:g}")

@@ -605,7 +605,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
 
     from .params import DemParams, load_params
     from .probes import directions
-    P = load_params(dem_params) if dem_params else DemParams()
+    P = load_params(dem_params, option="--dem-params") if dem_params else DemParams()
     os.makedirs(out_dir, exist_ok=True)
     dflt = DEFAULT_FULL if full else DEFAULT_SMALL
     n = dflt["n"] if n is None else int(n)
@@ -651,5 +651,14 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
               "fem_n_dir": fem_n_dir, "dem_eta_a_reached": dem["eta_a_reached"] if dem else None}
     with atomic_open(os.path.join(out_dir, "conclusions.json")) as f:
         json.dump({"conclusions": c, "timings": timings, "config": config}, f, indent=1, default=str)
+    # the parameters of the three parts, in the --params format (dem/biaxial/ and fem/ hold theirs
+    # too): --dem-params DIR/dem_params.json repeats the DEM sample
+    from hmodel.params import save_params as save_hparams
+
+    from .params import save_params
+    save_hparams(os.path.join(out_dir, "hmodel_params.json"), h["params"],
+                 "python -m dem crosscheck: the H-model part (Table I; the FE part: fem/params.json)")
+    save_params(os.path.join(out_dir, "dem_params.json"), P.replace(n=n, seed=seed),
+                "python -m dem crosscheck: the DEM sample (--dem-params repeats it)")
     write_report(out_dir, c, figs, timings, config)
     return c, timings

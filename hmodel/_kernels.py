@@ -272,8 +272,8 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     # flag (row 0) for the hexagons that are not in it, the stress (rows 1-3) and tangent (rows
     # 4-12) terms of the others. The loop below redoes the flagged hexagons the general way and
     # sums the terms in the orientation order, as it would without the fast pass (the same
-    # operations, so the same bits). Worth it when at least half the hexagons start closed, three
-    # quarters with the extras (else most of its work is discarded; either way the results are
+    # operations, so the same bits). Worth it when at least half the hexagons start closed, seven
+    # eighths with the extras (else most of its work is discarded; either way the results are
     # the same bits). With ``extras``
     # the pass also stores the hexagon's terms of dPi, its tangent, T3 and the micro sums (rows
     # 14-31), summed here in the orientation order like the general loop's. The sliding variant
@@ -290,11 +290,12 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
                 n_closed += 1
                 if abs(T1[p, i]) >= mu * N1[p, i]:
                     n_limit += 1
-    # with the extras the pass does seven vectorized loops instead of four: it costs about 0.7
-    # of the general loop a hexagon, and pays where three quarters of the hexagons start closed
-    # (measured, 180 orientations: 1.2-1.5x the general loop with every hexagon closed, 0.8x
-    # with 109 of 180)
-    use_fast = fast_ok and (4 * n_closed >= 3 * ndir if extras else 2 * n_closed >= ndir)
+    # with the extras the pass does seven vectorized loops instead of four: about the general
+    # loop's cost for a closed hexagon, whatever the open ones (which cost the general loop
+    # little), so it pays only where nearly every hexagon starts closed (measured at 180
+    # orientations, time of the general loop / the pass: 1.11-1.25 with all closed, 1.07 with
+    # 163, 0.94 with 141, 0.80 with 109): seven eighths
+    use_fast = fast_ok and (8 * n_closed >= 7 * ndir if extras else 2 * n_closed >= ndir)
     fast = np.empty((32 if extras else 14, ndir))
     with_sliding = allow_sliding and n_limit > 0
     # the literals pick the compiled variant of the pass (see ``_fast_pass``)

@@ -209,7 +209,7 @@ def params_from(args, p0=None):
     given = [(o, n, getattr(args, n)) for o, n, _ in PARAM_OPTIONS if getattr(args, n, None) is not None]
     sigma2 = getattr(args, "sigma2", None)
     if p0 is not None:
-        given.append(("p0 =", "p0", float(p0)))
+        given.append(("p0", "p0", float(p0)))
     elif isinstance(sigma2, (int, float)):
         given.append(("--sigma2", "p0", float(sigma2)))
     try:

@@ -66,12 +66,12 @@ def _assert_same_bits_as_general_loop(st, de, P):
 
 def _passes(st, P, extras):
     """(fast pass taken, its sliding variant taken) per point: the kernel's own rule, at least
-    half the hexagons closed at the start (three quarters with the extras), and a closed
+    half the hexagons closed at the start (seven eighths with the extras), and a closed
     hexagon at the Coulomb limit."""
     closed = ~st.is_open
     at_limit = (closed & (np.abs(st.T1) >= P.mu * st.N1)).any(axis=-1)
     n = closed.sum(axis=-1)
-    fast = 4 * n >= 3 * P.n_dir if extras else 2 * n >= P.n_dir
+    fast = 8 * n >= 7 * P.n_dir if extras else 2 * n >= P.n_dir
     return fast, fast & at_limit
 
 

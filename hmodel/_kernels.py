@@ -16,8 +16,8 @@ paths, the probes, the FE's ``MaterialField``): per point, a branch-free fast pa
 vectorizes over the orientations (``_fast_pass``: closed hexagons that stay closed, elastic or
 sliding, small rotation, no extra contact) and a general loop for the rest (open, opening,
 closing, extra contacts, large rotations) with the same operations in the same order, so the same
-bits, with or without the extras (Lagrangian tangent and increment, T3, micro sums).
-``update_general`` skips the fast pass: the reference of the tests.
+bits; ``extras=True`` (Lagrangian tangent, T3, micro sums) runs every hexagon through the general
+loop. ``update_general`` skips the fast pass: the reference of the tests.
 """
 import math
 
@@ -36,13 +36,10 @@ def _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_o
     (``_fast_pass``), so the compiler drops the sliding solve from the elastic pass, where a
     hexagon whose trial violates Coulomb (when sliding is allowed) is left to the general loop.
 
-    Returns two tuples: the new (d1, d2, alpha, N1, T1, N2, l1, l2, cos alpha, sin alpha),
-    ``other`` = 1.0 where the hexagon is not in this case (0.0 otherwise), ``slide`` (1.0 where
-    it slides), the three stress terms and the nine tangent terms (row-major) that the point
-    sums (Love-Weber, Eq. 23); and the terms of the extras that the point sums: the Lagrangian
-    increment dPi (3, Eq. 32), its tangent (9), the transport term T3 (3, Eq. 28) and the micro
-    sums w2, w2n, w2t (Eq. 36). A loop that stores none of the second tuple computes none of it
-    (the function is inlined)."""
+    Returns the new (d1, d2, alpha, N1, T1, N2, l1, l2, cos alpha, sin alpha), ``other`` = 1.0
+    where the hexagon is not in this case (0.0 otherwise), ``slide`` (1.0 where it slides), the
+    three stress terms and the nine tangent terms (row-major) that the point sums (Love-Weber,
+    Eq. 23)."""
     c = cos_t[i]
     s = sin_t[i]
     cc = c * c
@@ -138,109 +135,57 @@ def _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_o
     other = (was_open[p, i] | (trial_slides & (not with_sliding))
              | (nN1 < 0.0) | (nN2 < 0.0) | (not (abs(da) < 0.01))
              | (L1 < two_r) | (L2 < two_r) | (nl1 < two_r) | (nl2 < two_r))
-    # the extras (the general loop's ``if extras`` block for this case: no extra contact, so
-    # Df14 = Df26 = f14_0 = f26_0 = df14 = df26 = 0.0, kept as additions of ``zero``)
-    DN1 = -kn * dd1
-    DN2 = -kn * dd2
-    DT1 = (xi * mu * n1 - t1) + xi * mu * DN1 if slide else kt * D1 * da
-    DF2 = DN1 * sa + n1 * ca * da - DT1 * ca + t1 * sa * da
-    DP1 = 2.0 * DN2 + zero
-    DP2 = 2.0 * DF2 + 2.0 * zero
-    wA = w * DP1 * L1
-    wB = w * DP2 * L2
-    dDF2_0 = dN1_0 * sa + n1 * ca * x30 - dT1_0 * ca + t1 * sa * x30
-    dDF2_1 = dN1_1 * sa + n1 * ca * x31 - dT1_1 * ca + t1 * sa * x31
-    dDF2_2 = dN1_2 * sa + n1 * ca * x32 - dT1_2 * ca + t1 * sa * x32
-    dA0 = w * (2.0 * dN2_0 + zero) * L1; dA1 = w * (2.0 * dN2_1 + zero) * L1; dA2 = w * (2.0 * dN2_2 + zero) * L1
-    dB0 = w * (2.0 * dDF2_0 + 2.0 * zero) * L2; dB1 = w * (2.0 * dDF2_1 + 2.0 * zero) * L2
-    dB2 = w * (2.0 * dDF2_2 + 2.0 * zero) * L2
-    F2_0 = n1 * sa - t1 * ca
-    wC = w * (2.0 * N2[p, i] + zero) * dl1
-    wD = w * (2.0 * F2_0 + 2.0 * zero) * dl2
-    # two tuples: Python builds a literal of more than 30 items with an op-code Numba lacks
-    return ((D1 + dd1, d2[p, i] + dd2, alpha[p, i] + da, nN1, nT1, nN2, nl1, nl2, cna, sna,
-             1.0 if other else 0.0, 1.0 if slide else 0.0,
-             wS1 * cc + wS2 * ss, wS1 * ss + wS2 * cc, (wS1 - wS2) * cs,
-             w * (dS1_0 * cc + dS2_0 * ss), w * (dS1_1 * cc + dS2_1 * ss), w * (dS1_2 * cc + dS2_2 * ss),
-             w * (dS1_0 * ss + dS2_0 * cc), w * (dS1_1 * ss + dS2_1 * cc), w * (dS1_2 * ss + dS2_2 * cc),
-             w * (dS1_0 - dS2_0) * cs, w * (dS1_1 - dS2_1) * cs, w * (dS1_2 - dS2_2) * cs),
-            # the extras' terms: dPi (3), its tangent (9, row-major), T3 (3), w2, w2n, w2t
-            (wA * cc + wB * ss, wA * ss + wB * cc, (wA - wB) * cs,
-             dA0 * cc + dB0 * ss, dA1 * cc + dB1 * ss, dA2 * cc + dB2 * ss,
-             dA0 * ss + dB0 * cc, dA1 * ss + dB1 * cc, dA2 * ss + dB2 * cc,
-             (dA0 - dB0) * cs, (dA1 - dB1) * cs, (dA2 - dB2) * cs,
-             wC * cc + wD * ss, wC * ss + wD * cc, (wC - wD) * cs,
-             -w * (DP1 * dl1 + DP2 * dl2),
-             w * (4.0 * (-DN1 - t1 * da) * dd1 - 2.0 * DN2 * dd2 - zero * dl1 - 2.0 * zero * dl2),
-             w * (4.0 * (DT1 - n1 * da) * D1 * da)))
+    return (D1 + dd1, d2[p, i] + dd2, alpha[p, i] + da, nN1, nT1, nN2, nl1, nl2, cna, sna,
+            1.0 if other else 0.0, 1.0 if slide else 0.0,
+            wS1 * cc + wS2 * ss, wS1 * ss + wS2 * cc, (wS1 - wS2) * cs,
+            w * (dS1_0 * cc + dS2_0 * ss), w * (dS1_1 * cc + dS2_1 * ss), w * (dS1_2 * cc + dS2_2 * ss),
+            w * (dS1_0 * ss + dS2_0 * cc), w * (dS1_1 * ss + dS2_1 * cc), w * (dS1_2 * ss + dS2_2 * cc),
+            w * (dS1_0 - dS2_0) * cs, w * (dS1_1 - dS2_1) * cs, w * (dS1_2 - dS2_2) * cs)
 
 
 @njit(cache=True, error_model="numpy")
 def _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-               cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, with_sliding, extras,
+               cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, with_sliding,
                o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                fast):
     """The fast pass of point ``p``: ``_closed_hexagon`` for every orientation, elastic only or
     (``with_sliding``) elastic and sliding. Stores the ten new hexagon fields and the sliding
-    flags in the ``o_*`` arrays (open = False) and, in ``fast`` (14, n_dir; 32 with ``extras``),
-    the flag ``other`` (row 0), the stress terms (rows 1-3), the tangent terms (rows 4-12,
-    row-major), ``slide`` (row 13) and, with ``extras``, the terms of the Lagrangian increment
-    dPi (rows 14-16), of its tangent (rows 17-25, row-major), of T3 (rows 26-28) and of the
-    micro sums w2, w2n, w2t (rows 29-31).
+    flags in the ``o_*`` arrays (open = False) and, in ``fast`` (14, n_dir), the flag ``other``
+    (row 0), the stress terms (rows 1-3), the tangent terms (rows 4-12, row-major) and ``slide``
+    (row 13).
 
     Written for the compiler's loop vectorizer (SIMD over orientations): no branch, and each loop
     stores at most eight arrays (beyond that its run-time overlap checks rule vectorization out;
     the per-hexagon update is cheap, so each loop repeats it and the compiler keeps what that loop
     stores). ``with_sliding`` is dispatched as a literal (``numba.literally``: one compiled
     variant per value, the callers pass True or False), so the compiler folds it and the elastic
-    variant carries no Coulomb solve; ``extras`` likewise (a literal: the variant without them
-    has neither their loops nor their operations). error_model="numpy": 1/0 gives inf instead of
-    a branch to a ZeroDivisionError, which would also rule vectorization out; such a hexagon gets
-    a non-finite d_alpha, hence the flag, and the general loop redoes it (with Python's error
-    model)."""
+    variant carries no Coulomb solve. error_model="numpy": 1/0 gives inf instead of a branch to a
+    ZeroDivisionError, which would also rule vectorization out; such a hexagon gets a non-finite
+    d_alpha, hence the flag, and the general loop redoes it (with Python's error model)."""
     literally(with_sliding)      # one compiled variant per value: the literal folds
-    literally(extras)
     ndir = d1.shape[1]
     for i in range(ndir):
         h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
                             e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                            with_sliding)[0]
+                            with_sliding)
         o_d1[p, i] = h[0]; o_d2[p, i] = h[1]; o_alpha[p, i] = h[2]; o_N1[p, i] = h[3]
         o_T1[p, i] = h[4]; o_N2[p, i] = h[5]; o_l1[p, i] = h[6]; o_l2[p, i] = h[7]
     for i in range(ndir):
         h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
                             e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                            with_sliding)[0]
+                            with_sliding)
         o_cos_a[p, i] = h[8]; o_sin_a[p, i] = h[9]
         fast[0, i] = h[10]; fast[1, i] = h[12]; fast[2, i] = h[13]; fast[3, i] = h[14]
         fast[4, i] = h[15]; fast[5, i] = h[16]
     for i in range(ndir):
         h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
                             e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding,
-                            with_sliding)[0]
+                            with_sliding)
         fast[6, i] = h[17]; fast[7, i] = h[18]; fast[8, i] = h[19]; fast[9, i] = h[20]
         fast[10, i] = h[21]; fast[11, i] = h[22]; fast[12, i] = h[23]; fast[13, i] = h[11]
     for i in range(ndir):
         o_sliding[p, i] = fast[13, i] != 0.0
         o_open[p, i] = False
-    if extras:
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn,
-                                allow_sliding, with_sliding)[1]
-            fast[14, i] = h[0]; fast[15, i] = h[1]; fast[16, i] = h[2]; fast[17, i] = h[3]
-            fast[18, i] = h[4]; fast[19, i] = h[5]; fast[20, i] = h[6]; fast[21, i] = h[7]
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn,
-                                allow_sliding, with_sliding)[1]
-            fast[22, i] = h[8]; fast[23, i] = h[9]; fast[24, i] = h[10]; fast[25, i] = h[11]
-            fast[26, i] = h[12]; fast[27, i] = h[13]; fast[28, i] = h[14]; fast[29, i] = h[15]
-        for i in range(ndir):
-            h = _closed_hexagon(p, i, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open,
-                                e11, e22, e12, cos_t, sin_t, omega, kn, kt, mu, two_r, rkn,
-                                allow_sliding, with_sliding)[1]
-            fast[30, i] = h[16]; fast[31, i] = h[17]
 
 
 @njit(cache=True)
@@ -272,51 +217,34 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     # flag (row 0) for the hexagons that are not in it, the stress (rows 1-3) and tangent (rows
     # 4-12) terms of the others. The loop below redoes the flagged hexagons the general way and
     # sums the terms in the orientation order, as it would without the fast pass (the same
-    # operations, so the same bits). Worth it when at least half the hexagons start closed, seven
-    # eighths with the extras (else most of its work is discarded; either way the results are
-    # the same bits). With ``extras``
-    # the pass also stores the hexagon's terms of dPi, its tangent, T3 and the micro sums (rows
-    # 14-31), summed here in the orientation order like the general loop's. The sliding variant
-    # of the pass (the Coulomb solve
-    # computed for every hexagon) only where a closed hexagon starts at the Coulomb limit,
-    # |T1| >= mu N1 (exactly the hexagons that slid in the step that made the state: their
-    # T1 = +-mu N1); elsewhere the elastic variant, which leaves a hexagon that starts to slide
-    # to the general loop. The same bits either way: only the time differs.
+    # operations, so the same bits). Worth it when at least half the hexagons start closed (else
+    # most of its work is discarded; either way the results are the same bits). The extras are
+    # the general loop's only: with ``extras`` every hexagon goes through it (a fast pass that
+    # also computed them, tried for issue 19, took the first compilation from 84 s to 265 s and
+    # left the domain's time unchanged: docs/hmodel.md). The sliding variant of the pass (the
+    # Coulomb solve computed for every hexagon) only where a closed hexagon starts at the
+    # Coulomb limit, |T1| >= mu N1 (exactly the hexagons that slid in the step that made the
+    # state: their T1 = +-mu N1); elsewhere the elastic variant, which leaves a hexagon that
+    # starts to slide to the general loop. The same bits either way: only the time differs.
     n_closed = 0
     n_limit = 0
-    if fast_ok:
+    if fast_ok and not extras:
         for i in range(ndir):
             if not was_open[p, i]:
                 n_closed += 1
                 if abs(T1[p, i]) >= mu * N1[p, i]:
                     n_limit += 1
-    # with the extras the pass does seven vectorized loops instead of four: about the general
-    # loop's cost for a closed hexagon, whatever the open ones (which cost the general loop
-    # little), so it pays only where nearly every hexagon starts closed (measured at 180
-    # orientations, time of the general loop / the pass: 1.11-1.25 with all closed, 1.07 with
-    # 163, 0.94 with 141, 0.80 with 109): seven eighths
-    use_fast = fast_ok and (8 * n_closed >= 7 * ndir if extras else 2 * n_closed >= ndir)
-    fast = np.empty((32 if extras else 14, ndir))
+    use_fast = 2 * n_closed >= ndir and not extras and fast_ok
+    fast = np.empty((14, ndir))
     with_sliding = allow_sliding and n_limit > 0
-    # the literals pick the compiled variant of the pass (see ``_fast_pass``)
-    if use_fast and with_sliding and extras:
+    if use_fast and with_sliding:
         _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, True, True,
-                   o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
-                   o_sliding, o_open, fast)
-    elif use_fast and with_sliding:
-        _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, True, False,
-                   o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
-                   o_sliding, o_open, fast)
-    elif use_fast and extras:
-        _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, False, True,
+                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, True,
                    o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
                    o_sliding, o_open, fast)
     elif use_fast:
         _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11, e22, e12,
-                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, False, False,
+                   cos_t, sin_t, omega, kn, kt, mu, two_r, rkn, allow_sliding, False,
                    o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a,
                    o_sliding, o_open, fast)
     for i in range(ndir):
@@ -328,13 +256,6 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
             t00 += fast[4, i]; t01 += fast[5, i]; t02 += fast[6, i]
             t10 += fast[7, i]; t11 += fast[8, i]; t12 += fast[9, i]
             t20 += fast[10, i]; t21 += fast[11, i]; t22 += fast[12, i]
-            if extras:
-                P0 += fast[14, i]; P1 += fast[15, i]; P2 += fast[16, i]
-                L00 += fast[17, i]; L01 += fast[18, i]; L02 += fast[19, i]
-                L10 += fast[20, i]; L11 += fast[21, i]; L12 += fast[22, i]
-                L20 += fast[23, i]; L21 += fast[24, i]; L22 += fast[25, i]
-                q0 += fast[26, i]; q1 += fast[27, i]; q2 += fast[28, i]
-                w2 += fast[29, i]; w2n += fast[30, i]; w2t += fast[31, i]
             continue
         # general case: any pattern
         c = cos_t[i]
@@ -691,7 +612,8 @@ def update_general(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, ep
                    o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                    o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
     """``update_serial`` with every hexagon through the general loop, no fast pass: the
-    reference the fast pass is tested against (tests/hmodel/test_fast_pass.py); the same bits."""
+    reference the fast pass is tested against (tests/hmodel/test_fast_pass.py); the same bits.
+    Compiled on its first call only (not by ``compile_kernels``)."""
     for p in range(d1.shape[0]):
         _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
                       cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras, False,

@@ -58,7 +58,7 @@ def add_param_options(p, n_default=None):
 def cmd_params(a):
     from .params import save_params
     p = _params(a)
-    save_params(a.out, p)
+    save_params(a.out, p, f"python -m dem params; {a.params_note}")
     print(a.params_note)
     print(f"params: {a.out}")
 

@@ -252,7 +252,7 @@ def cmd_domain(args, stage):
 def cmd_params(args, stage):
     P = params_from(args)
     opt.check_out_file(args.out)
-    save_params(args.out, P)
+    save_params(args.out, P, f"python -m hmodel params; {args.params_note}")
     stage.wrote(os.path.basename(args.out))
     print(args.params_note)
     print(f"wrote {args.out}")

@@ -23,6 +23,7 @@ def test_params_file_round_trip_and_options_on_top(tmp_path, capsys):
     main(["params", "--out", str(f)])
     d = json.loads(f.read_text())
     assert d.pop("model") == "dem" and d.pop("units") == UNITS
+    assert d.pop("note") == "python -m dem params; parameters: the paper's set (defaults)"
     assert d == DemParams().to_dict()                 # the paper's stated set, every field
     g = tmp_path / "q.json"
     capsys.readouterr()

@@ -29,6 +29,7 @@ def table_one(tmp_path):
 def test_params_writes_table_one_with_units(table_one):
     d = json.loads(table_one.read_text())
     assert d.pop("model") == "hmodel" and d.pop("units") == UNITS
+    assert d.pop("note") == "python -m hmodel params; parameters: Table I (defaults)"
     P = HParams()
     assert d == {k: getattr(P, k) for k in UNITS}            # every field, Table I
     assert list(d) == list(UNITS) and load_params(table_one) == P

@@ -205,7 +205,7 @@ def cmd_crosscheck(a):
                                 workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
                                 dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
                                 dem_domain=a.dem_domain, dem_params=a.dem_params,
-                                scheduler=a.scheduler)
+                                scheduler=a.scheduler, hmodel_params=a.hmodel_params)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
@@ -357,6 +357,9 @@ def main(argv=None):
     x.add_argument("--out", required=True)
     x.add_argument("--dem-params", default=None,
                     help="DemParams file of the DEM sample (default: the paper's stated set)")
+    x.add_argument("--hmodel-params", default=None,
+                    help="HParams file of the H-model and FE parts (python -m hmodel params; "
+                         "default Table I; both at 200 kPa, the FE at 72 orientations)")
     x.add_argument("--full", action="store_true", help="the paper's 12,000 disks at 0.01/s (see README for the time)")
     x.add_argument("--n", type=opt.integer(2, 10_000_000), default=None, help="DEM disks (default 1000, 12000 with --full)")
     x.add_argument("--seed", type=opt.integer(0), default=1)
@@ -392,6 +395,9 @@ def main(argv=None):
             load_params(a.params)
         if getattr(a, "dem_params", None):
             load_params(a.dem_params, option="--dem-params")
+        if getattr(a, "hmodel_params", None):
+            from hmodel.params import load_params as load_hparams
+            load_hparams(a.hmodel_params, option="--hmodel-params")
         if a.cmd in ("probes", "domain", "calibrate", "crosscheck") and a.scheduler and a.workers:
             raise opt.OptionError("--workers and --scheduler: allowed one of them")
         if getattr(a, "scheduler", None):

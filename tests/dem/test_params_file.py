@@ -111,3 +111,19 @@ def test_a_state_refuses_parameters_that_are_not_its_own(small_sample, tmp_path,
     from dem.__main__ import _check_state_params
     import argparse
     _check_state_params(small_sample.params, argparse.Namespace(params=str(own), damping=None))
+
+
+def test_crosscheck_takes_an_hmodel_file(tmp_path, capsys):
+    """`crosscheck --hmodel-params FILE`: the H-model part runs the file's material at the
+    cross-check's 200 kPa; a file of the other model is refused before anything runs."""
+    from dem.crosscheck import hmodel_part
+    from dem.params import save_params
+    from hmodel import HParams
+    h = hmodel_part(domain_sigma2=(), params=HParams(n_dir=36, phi_g=25.0, p0=1e5))
+    assert h["params"] == HParams(n_dir=36, phi_g=25.0, p0=200e3)
+    f = tmp_path / "dem.json"
+    save_params(f, DemParams())
+    code, err = _run(["crosscheck", "--hmodel-params", str(f), "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and len(err) == 1 and "--hmodel-params" in err[0], err
+    assert 'model = "dem": allowed "hmodel"' in err[0]
+    assert not (tmp_path / "o").exists()

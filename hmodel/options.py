@@ -1,5 +1,7 @@
 """What the hmodel and fem command lines share: one-line errors, checked option types, output
-folders and memory checked before any computation, Ctrl-C / SIGTERM as one line.
+folders and memory checked before any computation, Ctrl-C / SIGTERM as one line, and the model
+parameters of a command (``add_param_options``, ``params_from``, ``record_params``: --params FILE
+with the options on top, docs/parameters.md).
 
 The rule (both CLIs): every option is validated before anything is computed or written; a bad
 one gives one line ``error: ...`` naming the option and its allowed range on stderr and exit

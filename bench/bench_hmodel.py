@@ -6,6 +6,9 @@
    of points in the isotropic state and at point A, against a plain NumPy version of the same
    update (stress only: it does less work) run in the same process.
 2. Wall time of the default drained path: Table I, 360 orientations, d_eps1 = 1e-5 to eps1 = 5 %.
+3. CPU time of the default bifurcation domain (``python -m hmodel domain``'s: Table I, 100, 200,
+   400 kPa) in this process, and the shares of its strain-probe sweeps and, in them, of the
+   update kernel with the extras.
 
 Usage: python bench/bench_hmodel.py [--points 2000] [--repeat 5]
 """
@@ -137,6 +140,36 @@ def main(argv=None):
     n_upd = int(np.sum(rr.newton_iters)) + len(rr.newton_iters) - 1
     print(f"drained path, Table I, 360 orientations, 5000 steps of 1e-5: {t_path:.3f} s"
           f" ({n_upd} updates at least, {n_upd * P.n_dir / t_path:.3g} hexagon updates/s incl. driver)")
+
+    # where the domain's time goes: its strain-probe sweeps, and in them the update kernel with
+    # the extras (both looked up at call time, so wrapped here for the measurement)
+    import hmodel.experiment as ex
+    spent = {"sweeps": 0.0, "kernel with the extras": 0.0}
+
+    def timed(f, key, when=lambda *a: True):
+        def g(*a, **k):
+            t = time.process_time()
+            try:
+                return f(*a, **k)
+            finally:
+                if when(*a):
+                    spent[key] += time.process_time() - t
+        return g
+
+    T = HParams()
+    ex.bifurcation_domain(T, [200e3], workers=1)
+    saved = ex.directional_sweep, _kernels.update_serial, _kernels.update_parallel
+    ex.directional_sweep = timed(saved[0], "sweeps")
+    _kernels.update_serial, _kernels.update_parallel = (
+        timed(k, "kernel with the extras", when=lambda *a: a[22]) for k in saved[1:])
+    try:
+        n_dom = max(1, args.repeat // 2)
+        t_dom = best_of(lambda: ex.bifurcation_domain(T, [100e3, 200e3, 400e3], workers=1), n_dom)
+    finally:
+        ex.directional_sweep, _kernels.update_serial, _kernels.update_parallel = saved
+    print(f"bifurcation domain, Table I, 100, 200, 400 kPa, one process: {t_dom:.2f} s CPU, of which "
+          f"the strain-probe sweeps {spent['sweeps'] / n_dom:.2f} s and, within them, the update "
+          f"kernel with the extras {spent['kernel with the extras'] / n_dom:.2f} s (means of {n_dom})")
 
 
 if __name__ == "__main__":

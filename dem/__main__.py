@@ -13,9 +13,10 @@ from .threads import available_threads
 
 
 def _params(a):
-    """DemParams of a command: --params FILE (or the paper's set), then the options given."""
-    from .params import load_params, params_from_options
-    return params_from_options(a, load_params(a.params) if a.params else None)
+    """DemParams of a command: --params FILE (or the paper's set), then the options given;
+    ``a.params_note`` says where the values came from (``dem.params.params_from_args``)."""
+    from .params import params_from_args
+    return params_from_args(a)
 
 
 def _check_state_params(own, a):
@@ -55,9 +56,10 @@ def add_param_options(p, n_default=None):
 
 
 def cmd_params(a):
-    from . import io
+    from .params import save_params
     p = _params(a)
-    io.atomic_write_bytes(a.out, (json.dumps(p.to_dict(), indent=1) + "\n").encode())
+    save_params(a.out, p, f"python -m dem params; {a.params_note}")
+    print(a.params_note)
     print(f"params: {a.out}")
 
 
@@ -85,7 +87,9 @@ def cmd_biaxial(a):
     res = run_biaxial(_params(a), a.out, rate=a.rate, confining=a.confining, eta_a=a.eta_a,
                       eps_max=a.eps_max, compaction_friction_deg=a.compaction_friction,
                       resume=a.resume, vtk=not a.no_vtk,
-                      save_fractions=tuple(a.save_fractions), save_etas=tuple(a.save_etas))
+                      save_fractions=tuple(a.save_fractions), save_etas=tuple(a.save_etas),
+                      params_note=f"python -m dem biaxial; {a.params_note}")
+    print(a.params_note)
     print(f"biaxial: {len(res.rows)} rows -> {os.path.join(a.out, 'biaxial.csv')}; "
           f"stateA={res.state_a_path} (eta_a reached: {res.eta_a_reached}); "
           f"porosity after compaction={res.compaction.get('porosity')}; "
@@ -103,16 +107,20 @@ def _probe_options(a):
 
 def cmd_probes(a):
     from . import io
+    from .params import record_params
     from .probes import reference_state, run_probes, write_probe_files
     opts = _probe_options(a)
     alphas = _directions(a)
     _threads(a)
     t0 = time.time()
     state, meta = io.load_state(a.state)
+    note = f"parameters: the state's own ({a.state})"
     if a.damping is not None:
+        note += f"; --damping {a.damping:g} overrides the state's damping {state.params.damping:g}"
         state = state._replace(params=state.params.replace(damping=a.damping))
     _check_state_params(state.params, a)
     os.makedirs(a.out, exist_ok=True)
+    record_params(a.out, state.params, f"python -m dem probes; {note}")
     ck = os.path.join(a.out, "probe_runs.jsonl")
     if not a.resume and os.path.exists(ck):
         # keep the earlier sweep until the new one replaces it
@@ -127,11 +135,13 @@ def cmd_probes(a):
     write_probe_files(rows, a.out, note=f"{state.params.n} disks, $\\sigma_2$ = {s2 / 1e3:.0f} kPa")
     from collections import Counter
     cnt = Counter(r["outcome"] for r in rows)
-    summary = {"state": os.path.abspath(a.state), "reference": ref, "n_disks": state.params.n,
+    summary = {"state": os.path.abspath(a.state), "parameters": note, "reference": ref,
+               "n_disks": state.params.n,
                "sigma2": s2, "directions": len(rows), "outcomes": dict(cnt),
                "options": opts._asdict(), "wall_time": time.time() - t0}
     io.atomic_write_bytes(os.path.join(a.out, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
+    print(note)
     print(f"probes: {len(rows)} directions -> {os.path.join(a.out, 'probes.csv')}; "
           f"reference: {ref}; " + ", ".join(f"{cnt[k]} {k}" for k in ("equilibrium", "failure",
                                                                        "undecided"))
@@ -221,7 +231,8 @@ def cmd_calibrate(a):
                         confining=a.confining, eps_max=a.eps_max,
                         post_peak_strain=a.post_peak_strain, smooth=a.smooth,
                         workers=a.workers, scheduler=a.scheduler, resume=a.resume,
-                        stage=getattr(a, "stage", None))
+                        stage=getattr(a, "stage", None), params_note=a.params_note)
+    print(a.params_note)
     print("\n".join(s["verdict"]["text"]))
     print(f"calibrate: {s['evaluations']} evaluations ({s['run_now']} run now, "
           f"{s['taken_from_checkpoint']} from the checkpoint), stopped: {s['stopped']}; "
@@ -236,8 +247,9 @@ def cmd_crosscheck(a):
                                 workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
                                 dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
                                 dem_domain=a.dem_domain, dem_params=a.dem_params,
-                                scheduler=a.scheduler, burst=not a.no_burst,
-                                burst_ratios=a.burst_ratios, burst_fractions=a.burst_fractions)
+                                scheduler=a.scheduler, hmodel_params=a.hmodel_params,
+                                burst=not a.no_burst, burst_ratios=a.burst_ratios,
+                                burst_fractions=a.burst_fractions)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
@@ -435,6 +447,9 @@ def build_parser() -> opt.Parser:
     x.add_argument("--out", required=True)
     x.add_argument("--dem-params", default=None,
                     help="DemParams file of the DEM sample (default: the paper's stated set)")
+    x.add_argument("--hmodel-params", default=None,
+                    help="HParams file of the H-model and FE parts (python -m hmodel params; "
+                         "default Table I; both at 200 kPa, the FE at 72 orientations)")
     x.add_argument("--full", action="store_true", help="the paper's 12,000 disks at 0.01/s (see README for the time)")
     x.add_argument("--n", type=opt.integer(2, 10_000_000), default=None, help="DEM disks (default 1000, 12000 with --full)")
     x.add_argument("--seed", type=opt.integer(0), default=1)
@@ -469,12 +484,21 @@ def build_parser() -> opt.Parser:
 
 def main(argv=None):
     def run(a, stage):
-        if a.cmd == "params":     # --out is the file to write: its folder must be usable
-            if os.path.isdir(a.out):
-                raise opt.OptionError(f"--out {a.out}: is a folder: allowed a file to write")
-            opt.check_out_dir(os.path.dirname(os.path.abspath(a.out)))
+        if a.cmd == "params":
+            opt.check_out_file(a.out)
         elif hasattr(a, "out"):
             opt.check_out_dir(a.out)
+        # a bad parameter file or option is refused before the compilation
+        from .params import load_params
+        if hasattr(a, "kn_over_d"):          # a command of add_param_options
+            _params(a)
+        elif getattr(a, "params", None):     # probes, domain: compared with the states' later
+            load_params(a.params)
+        if getattr(a, "dem_params", None):
+            load_params(a.dem_params, option="--dem-params")
+        if getattr(a, "hmodel_params", None):
+            from hmodel.params import load_params as load_hparams
+            load_hparams(a.hmodel_params, option="--hmodel-params")
         if a.cmd in ("probes", "domain", "calibrate", "crosscheck") and a.scheduler and a.workers:
             raise opt.OptionError("--workers and --scheduler: allowed one of them")
         if getattr(a, "scheduler", None):
@@ -504,7 +528,8 @@ def main(argv=None):
         stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"
                                    if hasattr(a, "resume") else ""))
         from . import kernels
-        if opt.announce_compilation([kernels.advance, kernels.build_pairs, kernels.contact_snapshot]):
+        if a.cmd != "params" and opt.announce_compilation([kernels.advance, kernels.build_pairs,
+                                                           kernels.contact_snapshot]):
             from .simulation import compile_kernels
             t = time.time()
             compile_kernels()         # before the command's own timers start

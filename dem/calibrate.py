@@ -48,7 +48,7 @@ import time
 
 import numpy as np
 
-from .params import OPTIONS, DemParams
+from .params import OPTIONS, DemParams, record_params, save_params
 
 TOLERANCES = {"peak_q": 0.05, "eps1_peak": 0.25, "secant": 0.20}
 FIGURE_TEXT = {"peak_q": "peak q", "eps1_peak": "eps1 at the peak",
@@ -491,10 +491,11 @@ def _fmt_figs(rec, target):
 def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel", grid=3,
                     min_step=1 / 16, max_evals=60, rate=0.01, confining=200e3, eps_max=0.035,
                     post_peak_strain=0.01, smooth=0.001, workers=None, scheduler=None,
-                    resume=False, verbose=True, task=None, stage=None):
+                    resume=False, verbose=True, task=None, stage=None, params_note=None):
     """Fit the fields ``vary`` of ``base`` (the start set) to the target's drained biaxial test
     (module docstring).  Writes out_dir/evaluations.jsonl (checkpoint), calibration.csv,
-    calibrated.json (a parameter file: the best set), curves.csv, calibration.png,
+    params.json (a parameter file: the start set ``base``; ``params_note`` says where it came
+    from), calibrated.json (a parameter file: the best set), curves.csv, calibration.png,
     calibration_search.png and summary.json; returns the summary.  ``task``: the evaluation
     function (default: the DEM run ``_evaluate_task``; tests pass a cheap one).  ``stage``: an
     ``hmodel.options.Stage`` told where the run is and what it has written (for the line of an
@@ -537,6 +538,8 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
     # -- from here on, files are written
     from . import io
     os.makedirs(out_dir, exist_ok=True)
+    record_params(out_dir, base, "python -m dem calibrate: the start set (the best set is "
+                  "calibrated.json)" + (f"; {params_note}" if params_note else ""))
     if not resume and os.path.exists(ck):
         os.replace(ck, os.path.join(out_dir, "evaluations.previous.jsonl"))
         _say(verbose, f"[calibrate] {out_dir} held an earlier calibration: moved to "
@@ -628,8 +631,8 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
     start_rec = records[0]
     _write_csv(out_dir, space, records, hfig)
     best_params = DemParams.from_dict(best["params"])
-    io.atomic_write_bytes(os.path.join(out_dir, "calibrated.json"),
-                          (json.dumps(best_params.to_dict(), indent=1) + "\n").encode())
+    save_params(os.path.join(out_dir, "calibrated.json"), best_params,
+                f"python -m dem calibrate: the best set of {len(records)} evaluations ({why})")
     paper = DemParams(n=base.n, seed=base.seed)
     start_label = "DEM, paper set" if base == paper else "DEM, start set"
     curves = [("hmodel", hcurve), ("dem_start", start_rec["curve"]),
@@ -654,7 +657,7 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                "mean_wall_time_per_evaluation": (float(np.mean([r["wall_time"] for r in records]))
                                                  if records else None),
                "wall_time": time.time() - t0,
-               "files": ["calibrated.json", "calibration.csv", "curves.csv", "calibration.png",
+               "files": ["params.json", "calibrated.json", "calibration.csv", "curves.csv", "calibration.png",
                          "calibration_search.png", "evaluations.jsonl", "summary.json"]}
     io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())

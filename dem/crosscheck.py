@@ -31,14 +31,15 @@ def _log(msg):
 
 # -- the three parts ---------------------------------------------------------------------------
 def hmodel_part(eta_a=1.029, sigma2=200e3, alphas=None, domain_sigma2=(100e3, 200e3, 400e3),
-                n_dir=180, workers=None):
+                n_dir=180, workers=None, params=None):
     """H-model at A: path, adaptive strain-probe sweep, stress probes in ``alphas`` [deg],
-    bifurcation domain. Returns a dict of arrays (SI, compression positive)."""
+    bifurcation domain. ``params``: the HParams (default Table I with ``n_dir``), at ``sigma2``
+    whatever their p0. Returns a dict of arrays (SI, compression positive)."""
     from hmodel import HParams
     from hmodel.experiment import biaxial_test, bifurcation_domain, state_at_eta
     from hmodel.probes import directional_sweep, stress_probes
 
-    P = HParams(n_dir=n_dir, p0=sigma2)
+    P = (HParams(n_dir=n_dir) if params is None else params).replace(p0=sigma2)
     path = biaxial_test(P, sigma2, 1e-5, 0.05)
     rA, sA = state_at_eta(P, eta_a, sigma2)
     sw = directional_sweep(sA, P, n=360)
@@ -49,13 +50,17 @@ def hmodel_part(eta_a=1.029, sigma2=200e3, alphas=None, domain_sigma2=(100e3, 20
     return out
 
 
-def fem_part(out_dir, nx=4, ny=8, n_dir=72, eps1_max=0.03):
-    """FE biaxial specimen (coarse mesh, no field output). Returns its curve (dict of arrays)."""
+def fem_part(out_dir, nx=4, ny=8, n_dir=72, eps1_max=0.03, params=None, sigma2=200e3):
+    """FE biaxial specimen (coarse mesh, no field output) of the material ``params`` (default
+    Table I) with ``n_dir`` orientations at ``sigma2``. Returns its curve (dict of arrays)."""
     from fem.biaxial import BiaxialConfig, run_biaxial
-    cfg = BiaxialConfig(nx=nx, ny=ny, n_dir=n_dir, eps1_max=eps1_max, d_eps1=1e-4, fields=False,
-                        n_sphere=200)
+    from hmodel import HParams
+    P = (HParams() if params is None else params).replace(n_dir=n_dir, p0=sigma2)
+    cfg = BiaxialConfig(nx=nx, ny=ny, eps1_max=eps1_max, d_eps1=1e-4, fields=False,
+                        n_sphere=200).with_params(P)
     res = run_biaxial(cfg, out_dir=out_dir)
-    return {"curve": res.curve, "events": res.events, "summary": res.summary, "n_dir": n_dir}
+    return {"curve": res.curve, "events": res.events, "summary": res.summary, "n_dir": n_dir,
+            "params": P}
 
 
 # eta = q/p with p = (s1 + s2)/2 of the state whose eta is 1.029 with p = (s1 + 2 s2)/3 (one
@@ -264,9 +269,8 @@ def conclusions(h: dict, dem_rows: list | None, fem: dict | None, dem: dict | No
                                                   and p3["eta"] < b["lower_eta"])
     if fem is not None:
         from hmodel.driver import drained_biaxial, isotropic_state, run_path
-        from hmodel.params import HParams
         cur = fem["curve"]
-        P = HParams(n_dir=fem["n_dir"])
+        P = fem["params"]
         e1 = np.asarray(cur["eps1"], float)
         r = run_path(isotropic_state(P), P, drained_biaxial(1e-4), int(round(e1[-1] / 1e-4)))
         qm = np.interp(e1, r.eps[:, 0], r.sigma[:, 0] - r.sigma[:, 1])
@@ -591,8 +595,8 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
 def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None, skip_dem=False,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
                    dem_max_steps=None, threads=None, resume=False, dem_domain=None,
-                   dem_params=None, scheduler=None, burst=True, burst_ratios=None,
-                   burst_fractions=None):
+                   dem_params=None, scheduler=None, hmodel_params=None, burst=True,
+                   burst_ratios=None, burst_fractions=None):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
@@ -602,6 +606,8 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     domain), default on except with ``full`` (there only at the comparison state: the
     12,000-disk domain is ``python -m dem domain``'s job).  ``dem_params``: a DemParams file
     for the DEM sample (default: the paper's stated set); the report names it.
+    ``hmodel_params``: an HParams file for the H-model and the FE parts (default Table I; the FE
+    at ``fem_n_dir`` orientations, both at the DEM's 200 kPa whatever the file's p0).
     ``scheduler``: the address of a dask.distributed scheduler for the DEM's relaxations and
     probe runs (see ``dem_part``; the H-model's domain stays in local processes).
     ``burst``: the burst section (``dem.crosscheck_burst``): the proportional strain paths of
@@ -612,7 +618,9 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
 
     from .params import DemParams, load_params
     from .probes import directions
-    P = load_params(dem_params) if dem_params else DemParams()
+    from hmodel.params import load_params as load_hparams
+    P = load_params(dem_params, option="--dem-params") if dem_params else DemParams()
+    H = load_hparams(hmodel_params, option="--hmodel-params") if hmodel_params else None
     os.makedirs(out_dir, exist_ok=True)
     dflt = DEFAULT_FULL if full else DEFAULT_SMALL
     n = dflt["n"] if n is None else int(n)
@@ -622,11 +630,13 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     t = time.time()
     _log("H-model: drained path, point A, directional analysis, bifurcation domain")
     h = hmodel_part(alphas=directions() if dem_alphas is None else list(dem_alphas),
-                    domain_sigma2=(100e3, 200e3, 400e3) if domain else (), workers=workers)
+                    domain_sigma2=(100e3, 200e3, 400e3) if domain else (), workers=workers,
+                    params=H)
     timings["H-model (path, probes, domain)"] = time.time() - t
     t = time.time()
     _log(f"FE: {fem_mesh[0]} x {fem_mesh[1]} quads, n_dir {fem_n_dir}")
-    fem = fem_part(os.path.join(out_dir, "fem"), nx=fem_mesh[0], ny=fem_mesh[1], n_dir=fem_n_dir)
+    fem = fem_part(os.path.join(out_dir, "fem"), nx=fem_mesh[0], ny=fem_mesh[1], n_dir=fem_n_dir,
+                   params=H)
     timings["FE specimen"] = time.time() - t
     dem = None
     if not skip_dem:
@@ -669,9 +679,21 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
               "dem_params": (os.path.abspath(dem_params) if dem_params else
                              "the paper's stated set (kn/D 32 GPa, kt/kn 0.42, 35 deg)"),
               "dem_params_values": P.replace(n=n, seed=seed).to_dict(),
+              "hmodel_params": (os.path.abspath(hmodel_params) if hmodel_params else
+                                "Table I (the FE at fem_n_dir orientations)"),
               "dem_probe_max_steps": dem_max_steps, "fem_mesh": list(fem_mesh),
               "fem_n_dir": fem_n_dir, "dem_eta_a_reached": dem["eta_a_reached"] if dem else None}
     with atomic_open(os.path.join(out_dir, "conclusions.json")) as f:
         json.dump({"conclusions": c, "timings": timings, "config": config}, f, indent=1, default=str)
+    # the parameters of the three parts, in the --params format (dem/biaxial/ and fem/ hold theirs
+    # too): --dem-params DIR/dem_params.json repeats the DEM sample
+    from hmodel.params import save_params as save_hparams
+
+    from .params import save_params
+    save_hparams(os.path.join(out_dir, "hmodel_params.json"), h["params"],
+                 "python -m dem crosscheck: the H-model part (--hmodel-params repeats it; the FE "
+                 "part: fem/params.json)")
+    save_params(os.path.join(out_dir, "dem_params.json"), P.replace(n=n, seed=seed),
+                "python -m dem crosscheck: the DEM sample (--dem-params repeats it)")
     write_report(out_dir, c, figs, timings, config)
     return c, timings

@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from . import io
+from .params import record_params
 from .probes import (COLUMNS as PROBE_COLUMNS, ProbeOptions, _map, csv_rows, directions,
                      reference_state, run_probe_sets, state_fingerprint, write_probe_files)
 
@@ -171,7 +172,8 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
                workers=None, scheduler=None, resume=False, verbose=True, hmodel=True,
                choose=None):
     """Relax every saved state, run its directional analysis (one pool for all), write
-    ``out_dir/domain.csv``, ``domain_probes.csv``, ``boundaries.json``, one sub-folder per state
+    ``out_dir/params.json`` (the states' parameters), ``domain.csv``, ``domain_probes.csv``,
+    ``boundaries.json``, one sub-folder per state
     (stateR.npz, probe_runs.jsonl, probes.csv, probe_histories.csv, Figs. 15-17) and the
     figures ``fig_domain_w2.png`` and ``fig_domain.png``.
 
@@ -184,6 +186,9 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
     todo, eta_peak = load_states(biaxial_dir, states)
     t0 = time.time()
     os.makedirs(out_dir, exist_ok=True)
+    if todo:      # the states of one biaxial test carry its parameters
+        record_params(out_dir, todo[0][1].params, "python -m dem domain; parameters: the states' "
+                      f"own ({os.path.abspath(biaxial_dir)})")
     log = (lambda m: print(f"[domain] {m}", file=sys.stderr, flush=True)) if verbose else (lambda m: None)
     dirs = [os.path.join(out_dir, name) for name, _, _ in todo]
     for d in dirs:

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import io
-from .params import DemParams
+from .params import DemParams, record_params
 from .sample import compact
 from .simulation import Simulation
 from .walls import biaxial
@@ -58,10 +58,12 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
                 eps_max=0.10, post_peak_strain=0.02, record_strain=1e-4,
                 compaction_friction_deg=0.0, checkpoint_every=50, resume=False,
                 verbose=True, figures=True, vtk=True, save_fractions=SAVE_FRACTIONS,
-                save_etas=()) -> BiaxialResult:
+                save_etas=(), params_note=None) -> BiaxialResult:
     """Compact, then run the drained biaxial test past the peak.
 
-    Writes out_dir/biaxial.csv, out_dir/stateA.npz (first eta >= eta_a; if never reached,
+    Writes out_dir/params.json first (``params``: ``--params out_dir/params.json`` repeats the
+    run; ``params_note`` says where they came from, also in summary.json), out_dir/biaxial.csv,
+    out_dir/stateA.npz (first eta >= eta_a; if never reached,
     the first state with eta >= 0.97 max(eta), flagged in out_dir/summary.json), figures fig13_q.png and
     fig14_epsv.png, VTK snapshots at A, out_dir/checkpoint.npz (+ rows) every
     `checkpoint_every` records so that `resume=True` continues an interrupted run.
@@ -90,6 +92,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
             raise ValueError(f"{name}={val!r}; allowed range: {rng}")
     t_start = time.time()
     os.makedirs(out_dir, exist_ok=True)
+    record_params(out_dir, params, params_note or "dem.experiment.run_biaxial")
     ck_path = os.path.join(out_dir, "checkpoint.npz")
     a_path = os.path.join(out_dir, "stateA.npz")
     rows = []
@@ -190,7 +193,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     wall = time.time() - t_start + info.get("wall_time_before", 0.0)
     summary = {k: v for k, v in info.items() if k not in ("rows", "candidates")}
     summary.update(n=sim.n, rate=rate, confining=confining, eta_a=eta_a, dt=sim.dt,
-                   wall_time=wall, params=params.to_dict())
+                   wall_time=wall, params=params.to_dict(), parameters=params_note)
     io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     if figures:

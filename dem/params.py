@@ -159,33 +159,50 @@ OPTIONS = {"--n": "n", "--seed": "seed", "--r-min": "r_min", "--r-max": "r_max",
            "--friction": "friction_deg", "--damping": "damping", "--dt-safety": "dt_safety",
            "--rolling-friction": "rolling_friction", "--rolling-stiffness": "rolling_stiffness"}
 
+# the unit of every field, as a parameter file records it (hmodel.paramfile)
+UNITS = {"n": "-", "r_min": "m", "r_max": "m", "density": "kg/m^3", "thickness": "m",
+         "kn_over_d": "Pa", "kt_over_kn": "-", "friction_deg": "deg", "damping": "-",
+         "normal_damping_ratio": "-", "dt_safety": "-", "skin_factor": "-", "servo_gain": "-",
+         "servo_smoothing": "-", "servo_vmax": "m/s", "seed": "-", "rolling_friction": "-",
+         "rolling_stiffness": "-"}
 
-def load_params(path) -> DemParams:
-    """DemParams from a parameter file (JSON of every field, as ``python -m dem params``
-    writes it); ValueError naming the file and what is wrong."""
-    import json
+
+def save_params(path, params: DemParams, note: str | None = None) -> None:
+    """Write ``params`` as a parameter file (the format of hmodel.paramfile, docs/parameters.md)."""
+    from hmodel.paramfile import write_params
+    write_params(path, params, "dem", UNITS, note)
+
+
+def load_params(path, option: str = "--params") -> DemParams:
+    """DemParams from a parameter file (as ``python -m dem params`` writes it, or a file of
+    every field and nothing else, the format before units); ValueError of one line naming the
+    file and the key."""
+    from hmodel.paramfile import read_params
+    return read_params(path, DemParams, "dem", UNITS, option=option)
+
+
+def record_params(out_dir, params: DemParams, note: str = "") -> str:
+    """Write ``params`` to ``out_dir``/params.json (``--params out_dir/params.json`` repeats the
+    run); returns the file name."""
+    import os
+    save_params(os.path.join(out_dir, "params.json"), params, note)
+    return "params.json"
+
+
+def params_from_args(a) -> DemParams:
+    """The parameters of a command: ``a.params`` (a parameter file) or the paper's set, with
+    every main-parameter option given on the command line (not None) on top. Sets
+    ``a.params_note``, the line of the run's summary that says where the values came from
+    ("parameters: the file p.json; --friction 30 overrides the file's friction_deg 35")."""
+    from hmodel.paramfile import override
+    path = getattr(a, "params", None)
+    base = load_params(path) if path else DemParams()
+    given = [(o, f, getattr(a, o[2:].replace("-", "_"))) for o, f in OPTIONS.items()
+             if getattr(a, o[2:].replace("-", "_"), None) is not None]
     try:
-        with open(path) as f:
-            d = json.load(f)
-    except OSError as e:
-        raise ValueError(f"--params {path}: {e.strerror}") from None
+        P, note = override(base, given, f"the file {path}" if path else "the paper's set (defaults)",
+                           base.replace)
     except ValueError as e:
-        raise ValueError(f"--params {path}: not JSON ({e})") from None
-    if not isinstance(d, dict):
-        raise ValueError(f"--params {path}: allowed a JSON object of the DemParams fields")
-    try:
-        return DemParams.from_dict(d)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"--params {path}: {e}") from None
-
-
-def params_from_options(a, base: DemParams | None = None) -> DemParams:
-    """The parameters of a command: ``base`` (a parameter file, or the defaults: the paper's
-    set), with every main-parameter option given on the command line (not None) on top."""
-    p = base if base is not None else DemParams()
-    kw = {f: getattr(a, o[2:].replace("-", "_")) for o, f in OPTIONS.items()
-          if getattr(a, o[2:].replace("-", "_"), None) is not None}
-    try:
-        return p.replace(**kw) if kw else p
-    except ValueError as e:
-        raise ValueError(f"{e} (from the options {', '.join(o for o, f in OPTIONS.items() if f in kw)})") from None
+        raise ValueError(f"{e} (from the options {', '.join(o for o, _, _ in given)})") from None
+    a.params_note = note
+    return P

@@ -13,7 +13,7 @@ from hmodel import options as opt
 from hmodel.experiment import compile_kernels
 from hmodel.params import ParamError
 
-from .biaxial import BiaxialConfig, run_biaxial, format_summary
+from .biaxial import MATERIAL, BiaxialConfig, run_biaxial, format_summary
 from .burst import BurstConfig, run_burst
 
 # Numba's OpenMP threads spin-wait after each parallel region of the material update (libgomp's
@@ -53,17 +53,9 @@ def _specimen_options(sub, d: BiaxialConfig, eps1_max: bool):
     if eps1_max:
         g.add_argument("--eps1-max", type=R(0, 0.5), default=d.eps1_max, help="final axial strain (default %(default)s)")
     g.add_argument("--d-eps1", type=R(0, 0.05), default=d.d_eps1, help="axial strain step (default %(default)s)")
-    g.add_argument("--sigma2", type=R(0, unit="Pa"), default=d.sigma2,
-                   help="confining pressure = p0 [Pa] (default %(default)s)")
-    g = sub.add_argument_group("material (Table I defaults)")
-    g.add_argument("--kn", type=float, default=d.kn)
-    g.add_argument("--kt", type=float, default=d.kt)
-    g.add_argument("--phi-g", type=float, default=d.phi_g)
-    g.add_argument("--alpha0", type=float, default=d.alpha0)
-    g.add_argument("--r-g", type=float, default=d.r_g)
-    g.add_argument("--thickness", type=float, default=None,
-                   help="hexagon slab thickness h [m] of the material (default 2 r_g)")
-    g.add_argument("--n-dir", type=int, default=d.n_dir)
+    g.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
+                   help="confining pressure = p0 [Pa] (default: p0 of --params FILE, or 200e3)")
+    opt.add_param_options(sub)
     g = sub.add_argument_group("imperfection")
     g.add_argument("--imperfection", choices=["none", "spot", "band"], default="none")
     g.add_argument("--imp-size", type=R(0, 1, hi_open=False), default=d.imp_size,
@@ -213,11 +205,14 @@ def main(argv=None) -> int:
 
 
 def _specimen_config(args) -> BiaxialConfig:
-    names = {f.name for f in dataclasses.fields(BiaxialConfig)}
-    kw = {k: v for k, v in vars(args).items() if k in names}
+    """The specimen of a command: its options, the material from --params FILE (or Table I) with
+    the options given on top (``hmodel.options.params_from``, which sets args.params_note)."""
+    P = opt.params_from(args)
+    kw = {k: v for k, v in vars(args).items()
+          if k in BiaxialConfig.__dataclass_fields__ and k not in MATERIAL}
     if kw["imperfection"] == "none":
         kw["imperfection"] = None
-    return BiaxialConfig(**kw)
+    return BiaxialConfig(**kw).with_params(P)
 
 
 def _run(args, stage) -> int:
@@ -238,7 +233,7 @@ def _run(args, stage) -> int:
 
     stage.at("set-up of the specimen")
     try:
-        res = run_biaxial(cfg, args.out, progress=progress)
+        res = run_biaxial(cfg, args.out, progress=progress, params_note=args.params_note)
     except RuntimeError as e:
         print(f"error: {e}", file=sys.stderr)
         r = getattr(e, "result", None)
@@ -246,6 +241,7 @@ def _run(args, stage) -> int:
             print(f"{r.timings['steps']} converged steps are in {args.out}", file=sys.stderr)
             print(format_summary(r.summary))
         return 1
+    print(args.params_note)
     print(format_summary(res.summary))
     t = res.timings
     print(f"{t['steps']} steps, {t['iterations']} Newton iterations, {t['total']:.1f} s total "
@@ -277,11 +273,14 @@ def _run_burst(args, stage) -> int:
             print(line, file=sys.stderr, flush=True)
 
     stage.at("set-up of the specimen")
+    os.makedirs(args.out, exist_ok=True)
+    stage.wrote(opt.record_params(args.out, spec.params(), f"python -m fem burst; {args.params_note}"))
     try:
         res = run_burst(cfg, args.out, progress=progress)
     except RuntimeError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
+    print(args.params_note)
     print(format_burst(res.rows))
     t = res.summary["timings"]
     print(f"{len(res.rows)} runs, {t['total']:.1f} s total (drained path {t['drained']:.1f} s, "

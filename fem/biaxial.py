@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from dataclasses import dataclass, asdict, field
+from dataclasses import dataclass, asdict, field, replace
 from pathlib import Path
 
 import numba
@@ -20,6 +20,7 @@ from .adapter import stress_to_model, strain_to_model
 from .indicators import GlobalCheck, GlobalCheckProcess, global_w2, local_indicators
 from .mesh import _count, rectangle, from_file
 from hmodel.io import atomic_write_bytes
+from hmodel.options import record_params
 
 from .output import (CurveWriter, FieldWriter, plot_curve, read_curve, first_events, cell_tensor,
                      nodal_vector, mode_fields, plot_mode)
@@ -27,7 +28,7 @@ from .problem import Biaxial, Imperfection
 from .reference import material_point_curve
 from .solver import LoadStepper
 
-__all__ = ["BiaxialConfig", "build_problem", "run_biaxial", "RunResult"]
+__all__ = ["BiaxialConfig", "MATERIAL", "build_problem", "run_biaxial", "RunResult"]
 
 
 @dataclass
@@ -36,7 +37,8 @@ class BiaxialConfig:
 
     width, height [m]; nx, ny cells; mesh_kind "quad" | "tri"; mesh_file (meshio-readable,
     overrides the generated mesh); eps1_max final axial strain; d_eps1 nominal step; material
-    parameters (sigma2 is the confining pressure = the material's p0); imperfection None |
+    parameters, every HParams field (sigma2 is the confining pressure = the material's p0;
+    ``params()``, ``with_params(P)``); imperfection None |
     "spot" | "band" with imp_size (fraction of the width), imp_phi_g, imp_alpha0 (weak values),
     imp_angle (band) [deg]; Newton rtol / max_iter / max_cutbacks; fields: write fields.xdmf;
     n_sphere: strain directions sampled for the local minimum of the normalized W2.
@@ -57,6 +59,8 @@ class BiaxialConfig:
     r_g: float = 1.0e-3
     thickness: float | None = None
     n_dir: int = 180
+    fabric_a: float = 0.0
+    fabric_b: float = 0.0
     sigma2: float = 200.0e3
     imperfection: str | None = None
     imp_size: float = 0.1
@@ -72,8 +76,18 @@ class BiaxialConfig:
     global_process: bool = True
 
     def params(self) -> HParams:
-        return HParams(kn=self.kn, kt=self.kt, phi_g=self.phi_g, alpha0=self.alpha0, r_g=self.r_g,
-                       p0=self.sigma2, n_dir=self.n_dir, thickness=self.thickness)
+        """The material's HParams (p0 = sigma2)."""
+        return HParams(**{f: getattr(self, c) for c, f in MATERIAL.items()})
+
+    def with_params(self, params: HParams) -> "BiaxialConfig":
+        """This configuration with the material of ``params`` (sigma2 = its p0)."""
+        return replace(self, **{c: getattr(params, f) for c, f in MATERIAL.items()})
+
+
+# the material fields of BiaxialConfig -> HParams field (sigma2, the confining pressure, is p0)
+MATERIAL = {"kn": "kn", "kt": "kt", "phi_g": "phi_g", "alpha0": "alpha0", "r_g": "r_g",
+            "thickness": "thickness", "n_dir": "n_dir", "fabric_a": "fabric_a",
+            "fabric_b": "fabric_b", "sigma2": "p0"}
 
 
 def build_problem(cfg: BiaxialConfig) -> Biaxial:
@@ -221,9 +235,11 @@ def format_summary(summ: dict) -> str:
     return "\n".join(lines)
 
 
-def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
+def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=None) -> RunResult:
     """Run the biaxial test of ``cfg``. With ``out_dir`` write the outputs there as the steps
-    converge; ``progress`` is a callable taking one line of text (None: silent).
+    converge, and its material as params.json first (``--params out_dir/params.json`` repeats
+    it; ``params_note``: where the values came from, also in summary.json); ``progress`` is a
+    callable taking one line of text (None: silent).
 
     A step that fails after every cut-back raises RuntimeError; the converged steps are on disk.
     """
@@ -246,6 +262,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
     first_mode = []     # mode_ks[_f].png drawn once each, at the first lam_min(K_s[_f]) <= 0
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
+        record_params(out, prob.params, "python -m fem biaxial" + (f"; {params_note}" if params_note else ""))
         writer = CurveWriter(out / "curve.csv")
         logf = open(out / "newton.log", "w")
         logf.write("# step d_eps1 | normalized residual |r|/(sigma2 H) of each iterate | "
@@ -351,6 +368,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None) -> RunResult:
                    steps=stepper.step, points=prob.npts, n_dir=prob.params.n_dir)
     summ["timings"] = timings
     summ["config"] = asdict(cfg)
+    summ["parameters"] = params_note
     summ["completed"] = error is None
     if out is not None:
         plot_curve(out / "curve.png", curve, mp,

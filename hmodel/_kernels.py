@@ -17,7 +17,7 @@ vectorizes over the orientations (``_fast_pass``: closed hexagons that stay clos
 sliding, small rotation, no extra contact) and a general loop for the rest (open, opening,
 closing, extra contacts, large rotations) with the same operations in the same order, so the same
 bits; ``extras=True`` (Lagrangian tangent, T3, micro sums) runs every hexagon through the general
-loop.
+loop. ``update_general`` skips the fast pass: the reference of the tests.
 """
 import math
 
@@ -190,13 +190,14 @@ def _fast_pass(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e11
 
 @njit(cache=True)
 def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
-                 cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
+                 cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras, fast_ok,
                  o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                  o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
     """Update the n_dir hexagons of point ``p`` (one iteration of the point loop). The point
     loop lives in the two drivers below, so that the parallel one has a trivial body (Numba's
     parfor analysis fails intermittently on this body's control flow: "unexpected cycle in
-    lookup()")."""
+    lookup()"). ``fast_ok=False`` sends every hexagon through the general loop (the reference
+    the fast pass is tested against, ``update_general``)."""
     ndir = d1.shape[1]
     two_r = 2.0 * r_g
     rkn = 1.0 / kn             # multiply, not divide, in the hexagon loop
@@ -218,21 +219,22 @@ def _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, 
     # sums the terms in the orientation order, as it would without the fast pass (the same
     # operations, so the same bits). Worth it when at least half the hexagons start closed (else
     # most of its work is discarded; either way the results are the same bits). The extras are
-    # the general loop's only: with ``extras`` every hexagon goes through it (the tests compare
-    # the fast pass against it that way). The sliding variant of the pass (the Coulomb solve
-    # computed for every hexagon) only where a closed hexagon starts at the Coulomb limit,
-    # |T1| >= mu N1 (exactly the hexagons that slid in the step that made the state: their
-    # T1 = +-mu N1); elsewhere the elastic variant, which leaves a hexagon that starts to slide
-    # to the general loop. The same bits either way: only the time differs.
+    # the general loop's only: with ``extras`` every hexagon goes through it (a fast pass that
+    # also computed them, tried for issue 19, took the first compilation from 84 s to 265 s and
+    # left the domain's time unchanged: docs/hmodel.md). The sliding variant of the pass (the
+    # Coulomb solve computed for every hexagon) only where a closed hexagon starts at the
+    # Coulomb limit, |T1| >= mu N1 (exactly the hexagons that slid in the step that made the
+    # state: their T1 = +-mu N1); elsewhere the elastic variant, which leaves a hexagon that
+    # starts to slide to the general loop. The same bits either way: only the time differs.
     n_closed = 0
     n_limit = 0
-    if not extras:
+    if fast_ok and not extras:
         for i in range(ndir):
             if not was_open[p, i]:
                 n_closed += 1
                 if abs(T1[p, i]) >= mu * N1[p, i]:
                     n_limit += 1
-    use_fast = 2 * n_closed >= ndir and not extras
+    use_fast = 2 * n_closed >= ndir and not extras and fast_ok
     fast = np.empty((14, ndir))
     with_sliding = allow_sliding and n_limit > 0
     if use_fast and with_sliding:
@@ -586,7 +588,7 @@ def update_serial(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps
     """The update of every point, one thread (arguments: see the module docstring)."""
     for p in range(d1.shape[0]):
         _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
-                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
+                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras, True,
                       o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
 
@@ -599,7 +601,22 @@ def update_parallel(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, e
     """The same, points spread over threads (each point is independent: same results)."""
     for p in prange(d1.shape[0]):
         _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
-                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
+                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras, True,
+                      o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
+                      o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
+
+
+@njit(cache=True)
+def update_general(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
+                   cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras,
+                   o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
+                   o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t):
+    """``update_serial`` with every hexagon through the general loop, no fast pass: the
+    reference the fast pass is tested against (tests/hmodel/test_fast_pass.py); the same bits.
+    Compiled on its first call only (not by ``compile_kernels``)."""
+    for p in range(d1.shape[0]):
+        _update_point(p, d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, V0, de,
+                      cos_t, sin_t, omega, kn, kt, mu, r_g, allow_sliding, extras, False,
                       o_d1, o_d2, o_alpha, o_N1, o_T1, o_N2, o_l1, o_l2, o_cos_a, o_sin_a, o_sliding, o_open,
                       o_sig, o_tan, o_tanL, o_dPi, o_T3, o_w2, o_w2n, o_w2t)
 

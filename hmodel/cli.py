@@ -1,5 +1,8 @@
-"""Command line: ``python -m hmodel {biaxial,probes,domain,fit} ...`` (thin layer over
-``hmodel.experiment``, ``hmodel.fit`` and ``hmodel.plots``)."""
+"""Command line: ``python -m hmodel {biaxial,probes,domain,burst,fit,params} ...`` (thin layer
+over ``hmodel.experiment``, ``hmodel.burst``, ``hmodel.fit`` and ``hmodel.plots``). The model
+parameters of every command: ``--params FILE`` and the options of ``options.add_param_options``,
+read by ``options.params_from``; every output folder records them in params.json
+(docs/parameters.md)."""
 from __future__ import annotations
 
 import argparse
@@ -18,7 +21,8 @@ from .driver import MixedControlError
 from .experiment import (DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test, bifurcation_domain,
                          compile_kernels, probe_columns, state_at_eta)
 from .io import atomic_open, json_safe, write_csv, write_table
-from .params import HParams, ParamError
+from .options import add_param_options, params_from, record_params
+from .params import ParamError, save_params
 from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
 
 # memory of one step of a path [bytes]: run_path's histories (3 + 3 floats, 3 ints), the
@@ -27,31 +31,6 @@ PATH_BYTES_PER_STEP = 8 * (3 + 3 + 3 + 6 + 12)
 # memory of one strain probe per orientation [bytes]: its broadcast state and the update's
 # outputs (10 floats + 2 flags each), twice for the refinement's concatenation
 PROBE_BYTES_PER_DIR = 2 * 2 * (10 * 8 + 2)
-
-
-def add_param_options(ap: argparse.ArgumentParser):
-    d = HParams()
-    g = ap.add_argument_group("model parameters (Table I defaults)")
-    g.add_argument("--kn", type=float, default=d.kn, help="normal contact stiffness [N/m]")
-    g.add_argument("--kt", type=float, default=d.kt, help="tangential contact stiffness [N/m]")
-    g.add_argument("--phi-g", type=float, default=d.phi_g, help="contact friction angle [deg]")
-    g.add_argument("--r-g", type=float, default=d.r_g, help="grain radius [m]")
-    g.add_argument("--alpha0", type=float, default=d.alpha0, help="initial hexagon opening angle [deg]")
-    g.add_argument("--n-dir", type=int, default=d.n_dir, help="number of hexagon orientations")
-    g.add_argument("--thickness", type=float, default=None, help="slab thickness h [m] (default 2 r_g)")
-    g.add_argument("--fabric-a", type=float, default=0.0, help="fabric anisotropy a, |a| < 1")
-    g.add_argument("--fabric-b", type=float, default=0.0, help="fabric direction b [deg]")
-
-
-def params_from(args, p0=None) -> HParams:
-    """The HParams of the model options; a value out of range is an OptionError naming the
-    option (``--sigma2`` for p0)."""
-    try:
-        return HParams(kn=args.kn, kt=args.kt, phi_g=args.phi_g, r_g=args.r_g, alpha0=args.alpha0,
-                       n_dir=args.n_dir, thickness=args.thickness, fabric_a=args.fabric_a,
-                       fabric_b=args.fabric_b, p0=args.sigma2 if p0 is None else p0)
-    except ParamError as e:
-        raise opt.param_option_error(e) from None
 
 
 def _check_path(args, eps1_max, options="--d-eps1"):
@@ -87,45 +66,47 @@ def _say(stage, text):
 
 def cmd_biaxial(args, stage):
     P = params_from(args)
+    sigma2 = P.p0
     _check_path(args, args.eps1_max, "--eps1-max / --d-eps1")
     if args.eps1_max >= 1.0:
         raise opt.OptionError(f"--eps1-max {args.eps1_max:g} is out of range: allowed 0 < value < 1 "
                               "(the volume V0 det(I - eps) vanishes at eps1 = 1)")
     stage.quiet = args.quiet
-    t0 = _start(args, stage, f"drained biaxial test, sigma2 = {args.sigma2:g} Pa, to eps1 = {args.eps1_max:g}")
-    r = biaxial_test(P, args.sigma2, args.d_eps1, args.eps1_max, progress=not args.quiet)
+    t0 = _start(args, stage, f"drained biaxial test, sigma2 = {sigma2:g} Pa, to eps1 = {args.eps1_max:g}")
+    r = biaxial_test(P, sigma2, args.d_eps1, args.eps1_max, progress=not args.quiet)
     cols = biaxial_columns(r)
     t_run = time.time() - t0
     _say(stage, "writing biaxial.csv and Figs. 4-5")
     os.makedirs(args.out, exist_ok=True)
     write_csv(os.path.join(args.out, "biaxial.csv"), cols)
-    stage.wrote("biaxial.csv")
+    stage.wrote("biaxial.csv", record_params(args.out, P, f"python -m hmodel biaxial; {args.params_note}"))
     k_pk = int(np.argmax(cols["q"]))
     hit = np.flatnonzero(cols["eta"] >= args.eta_a)
     a = (cols["eps1"][hit[0]], cols["q"][hit[0]], cols["eps_v"][hit[0]]) if hit.size else None
     plots.fig_q_eps1([("H-model", cols["eps1"], cols["q"])], os.path.join(args.out, "fig4_q_eps1.png"),
                      point_a=a[:2] if a else None,
                      peak=(cols["eps1"][k_pk], cols["q"][k_pk]) if 0 < k_pk < len(cols["q"]) - 1 else None,
-                     title=f"H-model drained biaxial test, $\\sigma_2$ = {args.sigma2 / 1e3:g} kPa (Fig. 4)")
+                     title=f"H-model drained biaxial test, $\\sigma_2$ = {sigma2 / 1e3:g} kPa (Fig. 4)")
     stage.wrote("fig4_q_eps1.png")
     plots.fig_epsv_eps1([("H-model", cols["eps1"], cols["eps_v"])], os.path.join(args.out, "fig5_epsv_eps1.png"),
                         point_a=(a[0], a[2]) if a else None,
-                        title=f"H-model drained biaxial test, $\\sigma_2$ = {args.sigma2 / 1e3:g} kPa (Fig. 5)")
+                        title=f"H-model drained biaxial test, $\\sigma_2$ = {sigma2 / 1e3:g} kPa (Fig. 5)")
     stage.wrote("fig5_epsv_eps1.png")
-    print(f"drained biaxial, sigma2 = {args.sigma2:g} Pa, {len(cols['eps1']) - 1} steps in {t_run:.2f} s")
+    print(args.params_note)
+    print(f"drained biaxial, sigma2 = {sigma2:g} Pa, {len(cols['eps1']) - 1} steps in {t_run:.2f} s")
     print(f"peak: q = {cols['q'][k_pk]:.6g} Pa, eta = {cols['eta'][k_pk]:.4f} at eps1 = {cols['eps1'][k_pk]:.4%}")
     if a:
         print(f"point A (eta >= {args.eta_a}): eps1 = {a[0]:.4%}, q = {a[1]:.6g} Pa"
               f" ({'before' if hit[0] < k_pk else 'after'} the peak)")
-    print(f"wrote {args.out}/biaxial.csv, fig4_q_eps1.png, fig5_epsv_eps1.png")
+    print(f"wrote {args.out}/biaxial.csv, params.json, fig4_q_eps1.png, fig5_epsv_eps1.png")
 
 
 def cmd_probes(args, stage):
     P = params_from(args)
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
-    t0 = _start(args, stage, f"drained path to point A (eta = {args.eta:g}), sigma2 = {args.sigma2:g} Pa")
-    r, sA = state_at_eta(P, args.eta, args.sigma2, args.d_eps1)
+    t0 = _start(args, stage, f"drained path to point A (eta = {args.eta:g}), sigma2 = {P.p0:g} Pa")
+    r, sA = state_at_eta(P, args.eta, P.p0, args.d_eps1)
     _say(stage, f"strain probes at A: {args.n} directions, refined where the response jumps")
     sw = directional_sweep(sA, P, n=args.n, norm=args.norm)
     _say(stage, f"stress probes every {args.stress_step:g} deg ({len(sw.alpha_eps)} strain probes done)")
@@ -136,7 +117,7 @@ def cmd_probes(args, stage):
     _say(stage, "writing probes.csv, stress_probes.csv, Figs. 3, 6-9, 11 and summary.json")
     os.makedirs(args.out, exist_ok=True)
     write_csv(os.path.join(args.out, "probes.csv"), probe_columns(sw))
-    stage.wrote("probes.csv")
+    stage.wrote("probes.csv", record_params(args.out, P, f"python -m hmodel probes; {args.params_note}"))
     cols = {"alpha_sigma_target": targets, "n_solutions": sp.n_solutions}
     cols.update({k: v for k, v in probe_columns(sp.probe).items()})
     write_csv(os.path.join(args.out, "stress_probes.csv"), cols)
@@ -153,7 +134,7 @@ def cmd_probes(args, stage):
     stage.wrote("Figs. 3, 6-9, 11")
     p, q, eta = r.invariants()
     summary = {
-        "sigma2": args.sigma2, "eta_A": float(eta[-1]), "eps1_A": float(r.eps[-1, 0]),
+        "parameters": args.params_note, "sigma2": P.p0, "eta_A": float(eta[-1]), "eps1_A": float(r.eps[-1, 0]),
         "p_A": float(p[-1]), "q_A": float(q[-1]), "n_probes": int(len(sw.alpha_eps)),
         "plastic_zone_alpha_sigma": arcs(sw.alpha_sigma, sw.plastic),
         "cone_w2_alpha_sigma": arcs(sw.alpha_sigma, sw.w2 <= 0),
@@ -169,6 +150,7 @@ def cmd_probes(args, stage):
     with atomic_open(pth("summary.json")) as f:
         json.dump(summary, f, indent=2)
     stage.wrote("summary.json")
+    print(args.params_note)
     print(f"point A: eta = {summary['eta_A']:.4f} at eps1 = {summary['eps1_A']:.4%} "
           f"({summary['n_probes']} strain probes, {t_run:.2f} s)")
     print(f"plastic tensorial zone (alpha_sigma, deg): {format_arcs(summary['plastic_zone_alpha_sigma'])}")
@@ -177,12 +159,13 @@ def cmd_probes(args, stage):
     print(f"min W2 = {summary['min_w2']:.4f} at alpha_sigma = {summary['alpha_sigma_min_w2']:.2f} deg; "
           f"min W2n = {summary['min_w2n']:.4f}")
     print(f"det(M) = {tc['det_M_cauchy']:.4g}, det(M_sym) = {tc['det_Msym_cauchy']:.4g} (Cauchy, loading pattern)")
-    print(f"wrote {args.out}/probes.csv, stress_probes.csv, summary.json and Figs. 3, 6-9, 11")
+    print(f"wrote {args.out}/probes.csv, stress_probes.csv, summary.json, params.json and Figs. 3, 6-9, 11")
 
 
 def cmd_burst(args, stage):
     from . import burst
     P = params_from(args)
+    args.sigma2 = P.p0               # the confining stress of the test: --sigma2, else the file's
     if args.dc is None:
         args.dc = 1e-4 * args.sigma2
     try:
@@ -255,13 +238,16 @@ def cmd_burst(args, stage):
                              f"kinetic energy after the switch, c held at c_switch + {args.dc:g} Pa")
     plots.fig_burst_residual(res.histories, pth("fig_burst_residual.png"))
     stage.wrote("fig_burst_paths.png", "fig_burst_ke.png", "fig_burst_residual.png")
+    stage.wrote(record_params(args.out, P, f"python -m hmodel burst; {args.params_note}"))
     summary = {"params": {f.name: getattr(P, f.name) for f in dataclasses.fields(P) if f.init},
+               "params_note": args.params_note,
                "options": {k: v for k, v in vars(args).items() if k not in ("func", "command")},
                "eta_peak_drained": res.eta_peak, "directional_analysis": cone,
                "runs": res.rows, "wall_time_s": t_run}
     with atomic_open(pth("summary.json")) as f:
         json.dump(json_safe(summary), f, indent=1, allow_nan=False)
     stage.wrote("summary.json")
+    print(args.params_note)
     print(f"drained peak eta = {res.eta_peak:.4f} at sigma2 = {args.sigma2:g} Pa"
           + (f"; first W2 = 0 of the directional analysis at eta = {cone['eta_first_w2']:.4f}"
              if cone else ""))
@@ -281,7 +267,7 @@ def cmd_burst(args, stage):
                   f"W2 <= 0 of the drained path at eta = {ce['eta']:.4f}")
     worst = max(r["energy_residual"] for r in res.rows) if res.rows else 0.0
     print(f"energy balance: largest relative residual of a step {worst:.2e} (bound 1e-6)")
-    print(f"wrote {args.out}/burst.csv, history.csv, paths.csv, summary.json, fig_burst_*.png "
+    print(f"wrote {args.out}/burst.csv, history.csv, paths.csv, params.json, summary.json, fig_burst_*.png "
           f"({t_run:.1f} s)")
 
 
@@ -293,7 +279,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
 
     b = sub.add_parser("biaxial", help="drained biaxial test (Figs. 4-5)")
-    b.add_argument("--sigma2", type=R(0, unit="Pa"), default=200e3, help="confining stress [Pa]")
+    b.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
+                   help="confining stress [Pa] (default: p0 of --params FILE, or 200e3)")
     b.add_argument("--eps1-max", type=R(0), default=0.05, help="final axial strain [-], < 1")
     b.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step [-]")
     b.add_argument("--eta-a", type=R(0, 2), default=1.029, help="stress ratio of point A (marked)")
@@ -305,7 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("probes", help="directional analysis at point A (Figs. 3, 6-9, 11)")
     p.add_argument("--eta", type=R(0, 2), default=1.029,
                    help="stress ratio q/p of point A (0 < eta < 2: q/p < 2 while sigma2 > 0)")
-    p.add_argument("--sigma2", type=R(0, unit="Pa"), default=200e3, help="confining stress [Pa]")
+    p.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
+                   help="confining stress [Pa] (default: p0 of --params FILE, or 200e3)")
     p.add_argument("--n", type=opt.integer(8), default=360, help="uniform strain directions before refinement")
     p.add_argument("--norm", type=R(0, 1e-2, hi_open=False), default=1e-6,
                    help="strain probe norm |d eps| [-] (a rate probe: small)")
@@ -318,8 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_probes)
 
     d = sub.add_parser("domain", help="bifurcation domain over confining pressures (Fig. 10)")
-    d.add_argument("--sigma2", type=opt.reals(0, unit="Pa"), default=[100e3, 200e3, 400e3],
-                   help="comma-separated confining stresses [Pa]")
+    d.add_argument("--sigma2", type=opt.reals(0, unit="Pa"), default=None,
+                   help="comma-separated confining stresses [Pa] (default: p0/2, p0, 2 p0 with p0 "
+                        "of --params FILE: 100e3,200e3,400e3 for Table I)")
     d.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step [-]")
     d.add_argument("--n", type=opt.integer(8), default=180, help="strain directions of each check")
     d.add_argument("--workers", type=opt.integer(1), default=None,
@@ -339,7 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
     u.add_argument("--dc", type=R(0, lo_open=False, unit="Pa"), default=None,
                    help="step of c = s1 + R s2 held after the switch [Pa] (dG = B dc per unit "
                         "thickness), >= 0 (default 1e-4 sigma2, as fem burst)")
-    u.add_argument("--sigma2", type=R(0, unit="Pa"), default=200e3, help="confining stress [Pa]")
+    u.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
+                   help="confining stress [Pa] (default: the p0 of --params, or 200e3)")
     u.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the paths [-]")
     u.add_argument("--path-strain", type=R(0, 0.2, hi_open=False), default=0.03,
                    help="axial strain of each proportional path from its start [-]")
@@ -385,6 +375,14 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--quiet", action="store_true", help="no progress lines")
     add_param_options(f)
     f.set_defaults(func=cmd_fit)
+
+    w = sub.add_parser("params", help="write a parameter file: Table I, or --params FILE, with "
+                                      "the options given on top (docs/parameters.md)")
+    w.add_argument("--out", required=True, help="the JSON file to write")
+    w.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
+                   help="p0: the confining stress of the initial state [Pa]")
+    add_param_options(w)
+    w.set_defaults(func=cmd_params)
     return ap
 
 
@@ -408,22 +406,29 @@ def main(argv=None) -> int:
 
 
 def cmd_domain(args, stage):
-    P = params_from(args, p0=args.sigma2[0])
+    P = params_from(args)
+    if args.sigma2 is None:
+        pressures = [0.5 * P.p0, P.p0, 2.0 * P.p0]
+        note = f"{args.params_note}; pressures p0/2, p0, 2 p0"
+    else:
+        pressures = args.sigma2
+        note = f"{args.params_note}; pressures --sigma2 (p0 {P.p0:g} not used)"
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
-    t0 = _start(args, stage, f"bifurcation domain at sigma2 = {', '.join(f'{s:g}' for s in args.sigma2)} Pa")
-    pts = bifurcation_domain(P, args.sigma2, workers=args.workers, d_eps1=args.d_eps1,
+    t0 = _start(args, stage, f"bifurcation domain at sigma2 = {', '.join(f'{s:g}' for s in pressures)} Pa")
+    pts = bifurcation_domain(P, pressures, workers=args.workers, d_eps1=args.d_eps1,
                              n_dir_probe=args.n, progress=lambda m: _say(stage, m))
     t_run = time.time() - t0
     os.makedirs(args.out, exist_ok=True)
     cols = {k: np.array([getattr(d, k) for d in pts]) for k in pts[0]._fields}
     write_csv(os.path.join(args.out, "domain.csv"), cols)
-    stage.wrote("domain.csv")
+    stage.wrote("domain.csv", record_params(args.out, P, f"python -m hmodel domain; {note}"))
     plots.fig_domain(pts, os.path.join(args.out, "fig10_domain.png"))
+    print(note)
     for d in pts:
         print(f"sigma2 = {d.sigma2:g} Pa: first W2<=0 at (p, q) = ({d.p_w2:.4g}, {d.q_w2:.4g}), "
               f"W2_sigma<=0 at ({d.p_w2sigma:.4g}, {d.q_w2sigma:.4g}), peak ({d.p_peak:.4g}, {d.q_peak:.4g}) Pa")
-    print(f"wrote {args.out}/domain.csv, fig10_domain.png ({t_run:.1f} s)")
+    print(f"wrote {args.out}/domain.csv, params.json, fig10_domain.png ({t_run:.1f} s)")
 
 
 def cmd_fit(args, stage):
@@ -462,7 +467,9 @@ def cmd_fit(args, stage):
                           if k != "func"}
     summary["wall_time_s"] = t_run
     if res.status == "fitted":
-        hfit.write_params(pth("params.json"), res.params)
+        save_params(pth("params.json"), res.params,
+                    f"python -m hmodel fit --data {args.data}: fitted {', '.join(args.free)}; "
+                    f"{args.params_note}")
         stage.wrote("params.json")
         cols = {"eps1": curve.eps1, "q": curve.q, "q_fit": res.model_q}
         rcols = {"eps1": curve.eps1, "r_q": res.residuals_q,
@@ -489,3 +496,12 @@ def cmd_fit(args, stage):
     print(f"wrote {args.out}/params.json, fit.csv, residuals.csv, correlation.json, summary.json, "
           f"fig_fit.png ({t_run:.1f} s)")
     return 0
+
+
+def cmd_params(args, stage):
+    P = params_from(args)
+    opt.check_out_file(args.out)
+    save_params(args.out, P, f"python -m hmodel params; {args.params_note}")
+    stage.wrote(os.path.basename(args.out))
+    print(args.params_note)
+    print(f"wrote {args.out}")

@@ -38,7 +38,7 @@ from .params import HParams
 __all__ = ["FREE_CHOICES", "DEFAULT_FREE", "MIN_POINTS", "Curve", "CurveError", "read_curve",
            "make_curve", "parse_free", "parse_bounds", "default_bounds", "check_free_bounds", "structural_reduction", "groups", "noise_sd",
            "curve_check", "model_curve", "FitResult", "fit_curve", "jacobian", "summary_dict",
-           "correlation_dict", "format_result", "write_params", "plot_fit"]
+           "correlation_dict", "format_result", "plot_fit"]
 
 # the parameters a fit may free, in the order ``structural_reduction`` keeps them
 FREE_CHOICES = ("kn", "kt", "phi_g", "alpha0", "p0", "r_g")
@@ -716,14 +716,6 @@ def _jsonable(o):
     if isinstance(o, np.bool_):
         return bool(o)
     return o
-
-
-def write_params(path, params: HParams) -> None:
-    """The parameter file: a JSON object of every HParams field (SI, degrees; thickness null
-    for 2 r_g), written atomically. ``HParams(**json.load(f))`` gives ``params`` back."""
-    with atomic_open(path) as f:
-        json.dump(_fields(params), f, indent=2)
-        f.write("\n")
 
 
 def plot_fit(curve: Curve, res: FitResult, path) -> None:

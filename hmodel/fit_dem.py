@@ -31,7 +31,7 @@ from . import cli, options as opt
 from .fit import _jsonable
 from .experiment import biaxial_test, domain_point, state_at_eta
 from .io import atomic_open, read_csv, save_figure, write_csv
-from .params import HParams
+from .params import HParams, load_params
 from .probes import arcs, directional_sweep, format_arcs, stress_probes
 
 __all__ = ["read_dem_domain", "param_argv", "eulerian_w2", "hmodel_state", "compare", "main"]
@@ -509,8 +509,7 @@ def main(argv=None) -> int:
         if code != 0:
             return code
         stage.wrote("the fit's files")
-        with open(os.path.join(args.out, "params.json")) as f:
-            P = HParams(**json.load(f))
+        P = load_params(os.path.join(args.out, "params.json"))
         with open(os.path.join(args.out, "summary.json")) as f:
             fit_summary = json.load(f)
         rows, bounds, dem_probes = read_dem_domain(args.dem)

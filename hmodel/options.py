@@ -1,5 +1,7 @@
 """What the hmodel and fem command lines share: one-line errors, checked option types, output
-folders and memory checked before any computation, Ctrl-C / SIGTERM as one line.
+folders and memory checked before any computation, Ctrl-C / SIGTERM as one line, and the model
+parameters of a command (``add_param_options``, ``params_from``, ``record_params``: --params FILE
+with the options on top, docs/parameters.md).
 
 The rule (both CLIs): every option is validated before anything is computed or written; a bad
 one gives one line ``error: ...`` naming the option and its allowed range on stderr and exit
@@ -19,8 +21,9 @@ import tempfile
 import threading
 from contextlib import contextmanager
 
-__all__ = ["OptionError", "Parser", "real", "integer", "reals", "check_out_dir", "check_memory",
-           "param_option_error", "Stage", "run_cli", "announce_compilation"]
+__all__ = ["OptionError", "Parser", "real", "integer", "reals", "check_out_dir", "check_out_file",
+           "check_memory", "param_option_error", "add_param_options", "params_from", "record_params",
+           "Stage", "run_cli", "announce_compilation"]
 
 
 class OptionError(ValueError):
@@ -128,6 +131,24 @@ def check_out_dir(path, option="--out"):
                           "writable folder") from None
 
 
+def check_out_file(path, option="--out"):
+    """Refuse an output file that cannot be written, before any computation: an existing folder,
+    or a parent folder that is missing, a file or not writable. Nothing is left behind."""
+    p = os.path.abspath(os.fspath(path))
+    if os.path.isdir(p):
+        raise OptionError(f"{option} {path}: is a folder: allowed a file (existing or to be created)")
+    parent = os.path.dirname(p)
+    if not os.path.isdir(parent):
+        raise OptionError(f"{option} {path}: the folder {parent} does not exist: allowed a file "
+                          "in an existing folder")
+    try:
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as e:
+        raise OptionError(f"{option} {path}: the folder {parent} is not writable ({e.strerror}): "
+                          "allowed a file in a writable folder") from None
+
+
 def _available_bytes():
     """MemAvailable of /proc/meminfo [bytes] (physical pages available elsewhere), or None."""
     try:
@@ -159,6 +180,63 @@ def param_option_error(e, option_of=None):
     opts = {"p0": "--sigma2", **(option_of or {})}
     opt = opts.get(e.name, "--" + e.name.replace("_", "-"))
     return OptionError(f"{opt} {e.value!r} is out of range: allowed {e.allowed}")
+
+
+# the options of the HParams fields (p0 is the confining stress of a test: --sigma2)
+PARAM_OPTIONS = (("--kn", "kn", "normal contact stiffness [N/m]"),
+                 ("--kt", "kt", "tangential contact stiffness [N/m]"),
+                 ("--phi-g", "phi_g", "contact friction angle [deg]"),
+                 ("--r-g", "r_g", "grain radius [m]"),
+                 ("--alpha0", "alpha0", "initial hexagon opening angle [deg]"),
+                 ("--n-dir", "n_dir", "number of hexagon orientations"),
+                 ("--thickness", "thickness", "slab thickness h [m] (file: null for 2 r_g)"),
+                 ("--fabric-a", "fabric_a", "fabric anisotropy a, |a| < 1"),
+                 ("--fabric-b", "fabric_b", "fabric direction b [deg]"))
+
+
+def add_param_options(ap: argparse.ArgumentParser):
+    """--params FILE and an option for every HParams field but p0 (the commands' --sigma2), all
+    None unless given: the file (or Table I) supplies the rest (``params_from``)."""
+    g = ap.add_argument_group("model parameters (Table I unless --params FILE; an option given "
+                              "overrides the file)")
+    g.add_argument("--params", default=None, metavar="FILE",
+                   help="HParams file (python -m hmodel params --out FILE; docs/parameters.md)")
+    for option, name, text in PARAM_OPTIONS:
+        g.add_argument(option, type=int if name == "n_dir" else float, default=None, help=text)
+
+
+def params_from(args, p0=None):
+    """The HParams of a command: the --params file (or Table I), then the options given on top;
+    p0 is ``p0`` if given, else --sigma2 when given as one value (the confining stress of the
+    test: it overrides the file's p0), else the file's. Sets ``args.params_note``, the line of
+    the run's summary that says where the values came from ("parameters: the file p.json;
+    --phi-g 25 overrides the file's phi_g 20"). A bad file or an option out of range is a
+    ValueError (OptionError) of one line naming the key or the option."""
+    from .paramfile import override
+    from .params import HParams, ParamError, load_params
+    path = getattr(args, "params", None)
+    base = load_params(path) if path else HParams()
+    given = [(o, n, getattr(args, n)) for o, n, _ in PARAM_OPTIONS if getattr(args, n, None) is not None]
+    sigma2 = getattr(args, "sigma2", None)
+    if p0 is not None:
+        given.append(("p0", "p0", float(p0)))
+    elif isinstance(sigma2, (int, float)):
+        given.append(("--sigma2", "p0", float(sigma2)))
+    try:
+        P, note = override(base, given, f"the file {path}" if path else "Table I (defaults)",
+                           base.replace)
+    except ParamError as e:
+        raise param_option_error(e) from None
+    args.params_note = note
+    return P
+
+
+def record_params(out_dir, params, note="") -> str:
+    """Write ``params`` to ``out_dir``/params.json (the --params format: the run repeats with
+    ``--params out_dir/params.json``); returns the file name."""
+    from .params import save_params
+    save_params(os.path.join(out_dir, "params.json"), params, note)
+    return "params.json"
 
 
 class Stage:

@@ -7,11 +7,15 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-__all__ = ["HParams", "ParamError"]
+__all__ = ["HParams", "ParamError", "UNITS", "load_params", "save_params"]
 
 # Grains 2-6 touch when alpha <= 30 deg (l2 = 4 r sin alpha <= 2 r); grains 1-4 when alpha >= 90 deg.
 ALPHA0_MIN_DEG = 30.0
 ALPHA0_MAX_DEG = 90.0
+
+# the unit of every field, as a parameter file records it (hmodel.paramfile)
+UNITS = {"kn": "N/m", "kt": "N/m", "phi_g": "deg", "r_g": "m", "alpha0": "deg", "p0": "Pa",
+         "thickness": "m", "n_dir": "-", "fabric_a": "-", "fabric_b": "deg"}
 
 
 @dataclass(frozen=True)
@@ -121,3 +125,21 @@ class ParamError(ValueError):
 def _check(ok, name, allowed, value):
     if not ok:
         raise ParamError(name, value, allowed)
+
+
+def save_params(path, params: HParams, note: str | None = None) -> None:
+    """Write ``params`` as a parameter file (docs/parameters.md; ``thickness`` null: 2 r_g)."""
+    from .paramfile import write_params
+    write_params(path, params, "hmodel", UNITS, note)
+
+
+def load_params(path, option: str = "--params") -> HParams:
+    """The HParams of a parameter file; ValueError of one line naming the file and the key."""
+    from .paramfile import read_params
+
+    def build(values):
+        try:
+            return HParams(**values)
+        except ParamError as e:
+            raise ValueError(f"{e.name} = {e.value!r} is out of range: allowed {e.allowed}") from None
+    return read_params(path, HParams, "hmodel", UNITS, build, option)

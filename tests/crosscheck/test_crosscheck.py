@@ -42,6 +42,14 @@ def test_outputs_written(xc):
     # the report says which DEM parameter set it ran
     assert saved["config"]["dem_params"].startswith("the paper's stated set")
     assert saved["config"]["dem_params_values"]["n"] == 300 and "dem_params" in rep
+    # the parameters of the three parts, in the --params format (docs/parameters.md)
+    from dem.params import DemParams, load_params as load_dem
+    from hmodel import HParams
+    from hmodel.params import load_params as load_h
+    assert load_h(out / "hmodel_params.json") == HParams()
+    assert load_h(out / "fem" / "params.json") == HParams(n_dir=72)
+    assert load_dem(out / "dem_params.json") == load_dem(out / "dem" / "biaxial" / "params.json") \
+        == DemParams(n=300, seed=1)
 
 
 def test_comparison_state_by_its_rule_and_every_probe_decided(xc):

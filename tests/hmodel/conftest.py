@@ -33,3 +33,14 @@ def state_A(params, iso_state):
 def sweep_A(params, state_A):
     from hmodel.probes import directional_sweep
     return directional_sweep(state_A, params, n=360)
+
+
+@pytest.fixture
+def no_computation(monkeypatch):
+    """Every experiment entry point of the CLI fails loudly: validation must come first."""
+    import hmodel.cli as cli
+
+    def boom(*a, **k):
+        raise AssertionError("computation started before the options were validated")
+    for name in ("biaxial_test", "state_at_eta", "bifurcation_domain", "compile_kernels"):
+        monkeypatch.setattr(cli, name, boom)

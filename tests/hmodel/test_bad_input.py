@@ -20,15 +20,6 @@ from hmodel.options import announce_compilation
 from tests._interrupt import interrupt_after
 
 
-@pytest.fixture
-def no_computation(monkeypatch):
-    """Every experiment entry point of the CLI fails loudly: validation must come first."""
-    def boom(*a, **k):
-        raise AssertionError("computation started before the options were validated")
-    for name in ("biaxial_test", "state_at_eta", "bifurcation_domain", "compile_kernels"):
-        monkeypatch.setattr(cli, name, boom)
-
-
 def _refused(capsys, argv, *needles):
     assert cli.main(argv) == 2
     cap = capsys.readouterr()

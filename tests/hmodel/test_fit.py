@@ -18,7 +18,7 @@ import hmodel.fit as hfit
 from hmodel import HParams
 from hmodel.experiment import biaxial_columns, biaxial_test
 from hmodel.fit import (CurveError, _covariance, _Problem, curve_check, fit_curve, jacobian,
-                        make_curve, model_curve, structural_reduction, write_params)
+                        make_curve, model_curve, structural_reduction)
 from hmodel.io import read_csv, write_csv
 from tests._interrupt import interrupt_after
 from tests.hmodel.test_bad_input import _refused, no_computation  # noqa: F401 (a fixture)
@@ -237,13 +237,13 @@ def test_peak_rule_on_a_plateau_and_on_the_dem_curve():
 
 
 # -- the parameter file --------------------------------------------------------------------------
-def test_write_params_round_trip(tmp_path):
+def test_fitted_params_file_round_trip(tmp_path):
+    """The fitted file is the shared parameter file (hmodel.params.save_params): read back, the
+    same HParams, any command takes it with --params."""
+    from hmodel.params import load_params, save_params
     for P in (TABLE_I.replace(kn=3.3e6, alpha0=51.25), TABLE_I.replace(thickness=4e-3)):
-        write_params(tmp_path / "p.json", P)
-        d = json.loads((tmp_path / "p.json").read_text())
-        assert set(d) == {"kn", "kt", "phi_g", "r_g", "alpha0", "p0", "thickness", "n_dir",
-                          "fabric_a", "fabric_b"}
-        assert HParams(**d) == P
+        save_params(tmp_path / "p.json", P, "fitted")
+        assert load_params(tmp_path / "p.json") == P
 
 
 # -- the command line ---------------------------------------------------------------------------------
@@ -265,7 +265,8 @@ def test_fit_cli_writes_every_output(tmp_path, table_i_noisy, capsys):
     files = sorted(os.listdir(out))
     assert files == ["correlation.json", "fig_fit.png", "fit.csv", "params.json", "residuals.csv",
                      "summary.json"]
-    P = HParams(**json.loads((out / "params.json").read_text()))
+    from hmodel.params import load_params
+    P = load_params(out / "params.json")
     assert P.n_dir == N_DIR and P.p0 == 200e3
     f = read_csv(out / "fit.csv")
     assert set(f) == {"eps1", "q", "q_fit", "eps_v", "eps_v_fit"} and f["eps1"].size == EPS1.size

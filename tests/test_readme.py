@@ -15,10 +15,6 @@ the 300-disk `dem biaxial`: 72 s together at their best under that load. The res
 hours (docs/performance.md). Each runs in a temporary working directory and must exit 0 and leave
 every file the row's "writes" column names in backticks (in its `--out` folder; for `params`,
 `--out` is the file).
-
-Commands other developers are adding now (issue 19) are skipped, with the reason naming them,
-while this branch's parsers lack them: PENDING and PENDING_OPTIONS, to be removed when they are
-merged.
 """
 from __future__ import annotations
 
@@ -37,16 +33,6 @@ README = ROOT / "README.md"
 MAX_LINES = 150           # the issue's "under ~150 lines"
 CHEAP_S = 30.0            # README time under load 4-8: the issue's "under ~15 s warm" idle
 
-PENDING = {
-    ("hmodel", "params"): "`python -m hmodel params` (issue 19, branch params-fit) is not merged yet",
-    ("hmodel", "fit"): "`python -m hmodel fit` (issue 19, branch hmodel-fit) is not merged yet",
-    ("fem", "burst"): "`python -m fem burst` (issue 18, branch fem-burst) is not merged yet",
-    ("dem", "burst"): "`python -m dem burst` (issue 18, branch dem-burst) is not merged yet",
-}
-PENDING_OPTIONS = {
-    "--params": "`--params FILE` on every hmodel and fem command (issue 19, branch params-fit) "
-                "is not merged yet",
-}
 SET_UP = ("python3 -m venv ", ". .venv/bin/activate", "pip install ", "python -m pytest")
 
 
@@ -139,16 +125,11 @@ def _check_available(module, argv):
     parser = _parser(module)
     sub = _subparser(parser, argv[0])
     if sub is None:
-        if (module, argv[0]) in PENDING:
-            pytest.skip(PENDING[(module, argv[0])])
         raise AssertionError(f"`python -m {module}` has no subcommand {argv[0]!r}")
     for word in argv[1:]:
         if word.startswith("--"):
             option = word.split("=", 1)[0]
             if option not in sub._option_string_actions:
-                if option in PENDING_OPTIONS:
-                    pytest.skip(f"{PENDING_OPTIONS[option]}: `python -m {module} {argv[0]}` "
-                                f"has no {option} on this branch")
                 raise AssertionError(f"`python -m {module} {argv[0]}` has no option {option} "
                                      "(written in full, as the README must)")
     return parser

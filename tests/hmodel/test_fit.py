@@ -21,7 +21,7 @@ from hmodel.fit import (CurveError, _covariance, _Problem, curve_check, fit_curv
                         make_curve, model_curve, structural_reduction)
 from hmodel.io import read_csv, write_csv
 from tests._interrupt import interrupt_after
-from tests.hmodel.test_bad_input import _refused, no_computation  # noqa: F401 (a fixture)
+from tests.hmodel.test_bad_input import _refused
 
 N_DIR = 36
 TABLE_I = HParams(n_dir=N_DIR)            # kn 1e6, kt 0.5e6, phi_g 20, alpha0 42.8, p0 200 kPa

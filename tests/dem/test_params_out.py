@@ -1,11 +1,7 @@
 """`dem params --out FILE`: --out names the file to write, so a second run replaces it (it was
 refused as "an existing file, not a folder", the rule of the commands whose --out is a folder),
 and a folder there is one line, exit 2."""
-import json
-
-import pytest
-
-from dem.params import DemParams
+from dem.params import DemParams, load_params
 
 
 def _main(argv, capsys):
@@ -21,7 +17,7 @@ def test_params_rewrites_its_file(tmp_path, capsys):
     f = tmp_path / "p.json"
     assert _main(["params", "--out", str(f)], capsys)[0] == 0
     assert _main(["params", "--friction", "30", "--out", str(f)], capsys)[0] == 0
-    assert DemParams.from_dict(json.loads(f.read_text())) == DemParams(friction_deg=30.0)
+    assert load_params(f) == DemParams(friction_deg=30.0)
 
 
 def test_params_refuses_a_folder(tmp_path, capsys):

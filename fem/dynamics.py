@@ -33,6 +33,7 @@ import scipy.sparse.linalg as spla
 from skfem import Basis, BilinearForm
 from skfem.helpers import dot
 
+from hmodel.burst import Specimen
 from hmodel.burst_rule import BurstRule, decide
 from .problem import Biaxial
 from .solver import FreeSolver, NewtonError
@@ -41,8 +42,8 @@ __all__ = ["DENSITY", "mass_matrix", "generalized_mass", "Tie", "TiedStatic", "N
            "Motion", "newmark_step", "TiedDynamics", "lowest_mode", "HoldResult", "hold",
            "HISTORY_COLUMNS"]
 
-# dry granular bulk density [kg/m^3] (sand, 1500-1700)
-DENSITY = 1600.0
+# dry granular bulk density [kg/m^3] (sand, 1500-1700): the material point's specimen's
+DENSITY = Specimen().density
 
 
 def mass_matrix(prob: Biaxial, density: float = DENSITY) -> sp.csr_matrix:
@@ -63,9 +64,10 @@ def mass_matrix(prob: Biaxial, density: float = DENSITY) -> sp.csr_matrix:
 
 
 def generalized_mass(density: float, width: float, height: float, ratio: float) -> float:
-    """m_G = rho B H (1/3 + R^2 B^2 / (12 H^2)) [kg/m]: the kinetic energy of the homogeneous
-    motion along the tie is m_G U1'^2 / 2 (bottom fixed, lateral faces symmetric; docs/burst.md)."""
-    return density * width * height * (1.0 / 3.0 + ratio ** 2 * width ** 2 / (12.0 * height ** 2))
+    """m_G [kg/m]: the kinetic energy of the homogeneous motion along the tie is m_G U1'^2 / 2
+    (bottom fixed, lateral faces symmetric; docs/burst.md): the material point's
+    ``hmodel.burst.Specimen.mass``, rho B H (1/3 + R^2 B^2 / (12 H^2))."""
+    return Specimen(width, height, density).mass(ratio)
 
 
 class Tie:

@@ -7,8 +7,10 @@
    update (stress only: it does less work) run in the same process.
 2. Wall time of the default drained path: Table I, 360 orientations, d_eps1 = 1e-5 to eps1 = 5 %.
 3. CPU time of the default bifurcation domain (``python -m hmodel domain``'s: Table I, 100, 200,
-   400 kPa) in this process, and the shares of its strain-probe sweeps and, in them, of the
-   update kernel with the extras.
+   400 kPa) in this process on one thread, by its route and by the general route it replaced
+   (issue 19: full sweeps, the path step by step), interleaved, with the ratio and whether the
+   results are the same bits; and the shares of the sign checks and, in them, of the update
+   kernel with the extras.
 
 Usage: python bench/bench_hmodel.py [--points 2000] [--repeat 5]
 """
@@ -141,10 +143,23 @@ def main(argv=None):
     print(f"drained path, Table I, 360 orientations, 5000 steps of 1e-5: {t_path:.3f} s"
           f" ({n_upd} updates at least, {n_upd * P.n_dir / t_path:.3g} hexagon updates/s incl. driver)")
 
-    # where the domain's time goes: its strain-probe sweeps, and in them the update kernel with
-    # the extras (both looked up at call time, so wrapped here for the measurement)
+    # the default domain by its route (lean probes, the sign check that stops refining once both
+    # signs are known, the Numba path with states kept only where a criterion fired) and by the
+    # general route it replaced (every check a full directional_sweep, every block of the path
+    # step by step with its states), interleaved in this process; one Numba thread, the CPU
+    # time of the process; and where the time goes (both looked up at call time, so wrapped)
     import hmodel.experiment as ex
-    spent = {"sweeps": 0.0, "kernel with the extras": 0.0}
+    from hmodel.probes import directional_sweep
+
+    def general_signs(st, p, n):
+        sw = directional_sweep(st, p, n=n)
+        return bool(np.nanmin(sw.w2) <= 0.0), bool(np.nanmin(sw.w2_sigma) <= 0.0)
+
+    def general_path(*a, **k):
+        k["keep_states"] = True
+        return run_path(*a, **k)
+
+    spent = {"checks": 0.0, "kernel with the extras": 0.0}
 
     def timed(f, key, when=lambda *a: True):
         def g(*a, **k):
@@ -156,21 +171,45 @@ def main(argv=None):
                     spent[key] += time.process_time() - t
         return g
 
+    import numba
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
     T = HParams()
+    pressures = [100e3, 200e3, 400e3]
+    route = ex.w2_vanishes, ex.run_path
+    general = general_signs, general_path
     ex.bifurcation_domain(T, [200e3], workers=1)
-    saved = ex.directional_sweep, _kernels.update_serial, _kernels.update_parallel
-    ex.directional_sweep = timed(saved[0], "sweeps")
-    _kernels.update_serial, _kernels.update_parallel = (
-        timed(k, "kernel with the extras", when=lambda *a: a[22]) for k in saved[1:])
+    n_dom = max(1, args.repeat // 2)
+    times = {"route": [], "general": []}
+    points = {}
     try:
-        n_dom = max(1, args.repeat // 2)
-        t_dom = best_of(lambda: ex.bifurcation_domain(T, [100e3, 200e3, 400e3], workers=1), n_dom)
+        for _ in range(n_dom):
+            for name, (signs, path) in (("general", general), ("route", route)):
+                ex.w2_vanishes, ex.run_path = signs, path
+                t = time.process_time()
+                points[name] = ex.bifurcation_domain(T, pressures, workers=1)
+                times[name].append(time.process_time() - t)
+        saved = ex.w2_vanishes, _kernels.update_serial, _kernels.update_parallel
+        ex.w2_vanishes, ex.run_path = route
+        ex.w2_vanishes = timed(saved[0], "checks")
+        _kernels.update_serial, _kernels.update_parallel = (
+            timed(k, "kernel with the extras", when=lambda *a: a[22]) for k in saved[1:])
+        try:
+            t = time.process_time()
+            ex.bifurcation_domain(T, pressures, workers=1)
+            t_one = time.process_time() - t
+        finally:
+            ex.w2_vanishes, _kernels.update_serial, _kernels.update_parallel = saved
     finally:
-        ex.directional_sweep, _kernels.update_serial, _kernels.update_parallel = saved
-    print(f"bifurcation domain, Table I, 100, 200, 400 kPa, one process: {t_dom:.2f} s CPU, of which "
-          f"the strain-probe sweeps {spent['sweeps'] / n_dom:.2f} s and, within them, the update "
-          f"kernel with the extras {spent['kernel with the extras'] / n_dom:.2f} s (means of {n_dom})")
-
+        ex.w2_vanishes, ex.run_path = route
+        numba.set_num_threads(threads)
+    same = [tuple(a) for a in points["route"]] == [tuple(b) for b in points["general"]]
+    t_r, t_g = min(times["route"]), min(times["general"])
+    print(f"bifurcation domain, Table I, 100, 200, 400 kPa, one process, one thread (CPU, best of "
+          f"{n_dom}, interleaved): {t_r:.2f} s; the general route {t_g:.2f} s: x{t_g / t_r:.2f}; "
+          f"the same DomainPoints to the bit: {same}")
+    print(f"  one more run by the route, {t_one:.2f} s: the sign checks {spent['checks']:.2f} s and, "
+          f"within them, the update kernel with the extras {spent['kernel with the extras']:.2f} s")
 
 if __name__ == "__main__":
     main()

@@ -14,7 +14,7 @@ import numpy as np
 from .driver import PathResult, drained_biaxial, isotropic_state, run_path, stress_invariants
 from .material import HState
 from .params import HParams
-from .probes import ProbeResult, directional_sweep
+from .probes import ProbeResult, w2_vanishes
 
 __all__ = ["biaxial_test", "state_at_eta", "biaxial_columns", "probe_columns", "DomainPoint",
            "domain_point", "bifurcation_domain", "compile_kernels", "DOMAIN_EPS1_MAX"]
@@ -150,8 +150,8 @@ def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_eve
     steps = 0
 
     def fires(st):
-        sw = directional_sweep(st, p, n=n_dir_probe)
-        return {"w2": bool(np.nanmin(sw.w2) <= 0.0), "w2_sigma": bool(np.nanmin(sw.w2_sigma) <= 0.0)}
+        w2, w2_sigma = w2_vanishes(st, p, n=n_dir_probe)
+        return {"w2": w2, "w2_sigma": w2_sigma}
 
     def first_firing(states, f_end, keys):
         """Row of ``states`` (1..m) of the first state where each of ``keys`` fires, knowing that
@@ -172,7 +172,7 @@ def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_eve
         return out
 
     while steps < n_max and (peak is None or any(v is None for v in found.values())):
-        r = run_path(state, p, ctl, check_every, keep_states=any(v is None for v in found.values()))
+        r = run_path(state, p, ctl, check_every)
         pp, qq, _ = r.invariants()
         # the peak: first row where q stops increasing
         for j in range(1, len(qq)):
@@ -182,8 +182,12 @@ def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_eve
         if any(v is None for v in found.values()):
             f_end = fires(r.state)
             keys = [key for key in found if found[key] is None and f_end[key]]
-            for key, j in first_firing(r.states, f_end, keys).items():
-                found[key] = (pp[j], qq[j], eps1 + r.eps[j, 0])
+            # the block's states only where a criterion fired in it: run again keeping them (the
+            # Numba loop and the step-by-step loop give the same bits: tests/hmodel/test_domain_route.py)
+            if keys:
+                states = run_path(state, p, ctl, check_every, keep_states=True).states
+                for key, j in first_firing(states, f_end, keys).items():
+                    found[key] = (pp[j], qq[j], eps1 + r.eps[j, 0])
         eps1 += r.eps[-1, 0]
         steps += check_every
         state = r.state

@@ -22,7 +22,8 @@ from . import _kernels
 from .params import HParams
 
 __all__ = [
-    "HState", "HEX_FIELDS", "Increment", "reference_state", "update", "update_full", "broadcast_state",
+    "HState", "HEX_FIELDS", "Increment", "reference_state", "update", "update_full", "update_copies",
+    "broadcast_state",
     "to_voigt", "from_voigt", "tangent_from_voigt", "take_points", "check_state",
 ]
 
@@ -208,18 +209,44 @@ def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = Tru
     if not np.all(np.isfinite(d_eps)):
         raise ValueError("d_eps contains non-finite values (nan or inf)")
     check_state(state, params)
-    args = kernel_args(state, params)
-    npts = args[-1].shape[0]
     de = to_voigt(d_eps)
+    out = _run_kernel(state, kernel_args(state, params)[:-1], de, params, allow_sliding, parallel,
+                      extras)
+    return increment_from_outputs(state, de, out)
+
+
+def update_copies(state: HState, de: np.ndarray, params: HParams, allow_sliding: bool = True,
+                  extras: bool = True) -> tuple:
+    """The kernel's outputs (``_kernels.allocate_outputs`` order, rows = points) for copies of
+    the single-point ``state``, one copy per row of the strain increments ``de`` (n, 3) in
+    (11, 22, 12) order: the numbers ``update_full(broadcast_state(state, (n,)), ...)`` gives, to
+    the bit, without wrapping them in states and tensors (the probes' batches, where that
+    wrapping cost as much as the update)."""
+    if state.batch_shape != ():
+        raise ValueError(f"update_copies needs a single-point state, got batch {state.batch_shape}")
+    de = np.ascontiguousarray(de, dtype=float)
+    if de.ndim != 2 or de.shape[1] != 3:
+        raise ValueError(f"de must have shape (n, 3), got {de.shape}")
+    if not np.all(np.isfinite(de)):
+        raise ValueError("d_eps contains non-finite values (nan or inf)")
+    check_state(state, params)
+    n = de.shape[0]
+    args = tuple(np.repeat(a, n, axis=0) for a in kernel_args(state, params)[:-1])
+    return _run_kernel(state, args, de, params, allow_sliding, None, extras)
+
+
+def _run_kernel(state, args, de, params, allow_sliding, parallel, extras):
+    """The update kernel on the kernel arguments ``args`` (of ``state``, or of copies of it)."""
+    npts = args[-1].shape[0]
     out = _kernels.allocate_outputs(npts, state.n_dir)
     if parallel is None:
         parallel = npts >= PARALLEL_MIN_POINTS
     kern = _kernels.update_parallel if parallel else _kernels.update_serial
-    kern(*args[:-1], de, *_material_args(params), bool(allow_sliding), bool(extras), *out)
+    kern(*args, de, *_material_args(params), bool(allow_sliding), bool(extras), *out)
     sig, tan = out[12], out[13]
     if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
         _refuse_non_finite(state)
-    return increment_from_outputs(state, de, out)
+    return out
 
 
 def check_state(state: HState, params: HParams) -> None:

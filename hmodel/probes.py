@@ -13,10 +13,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .material import HState, broadcast_state, to_voigt, update_full
+from .material import HState, to_voigt, update_full, update_copies
 from .params import HParams
 
-__all__ = ["ProbeResult", "StressProbeResult", "strain_probes", "directional_sweep",
+__all__ = ["ProbeResult", "StressProbeResult", "strain_probes", "directional_sweep", "w2_vanishes",
            "stress_probes", "tangent_criteria", "min_w2", "arcs", "format_arcs"]
 
 DEFAULT_PROBE_NORM = 1e-6   # |d_eps| of a strain probe: a tenth of the default path step
@@ -57,11 +57,11 @@ class ProbeResult(NamedTuple):
     n_open: np.ndarray
 
     def take(self, idx) -> "ProbeResult":
-        return ProbeResult(*(np.asarray(f)[idx] for f in self))
+        return _take(self, idx)
 
     @staticmethod
     def concat(results) -> "ProbeResult":
-        return ProbeResult(*(np.concatenate([getattr(r, f) for r in results]) for f in ProbeResult._fields))
+        return _concat(results)
 
 
 def _ddot(a, b):
@@ -83,32 +83,58 @@ def _check_state(state: HState):
         raise ValueError(f"probes start from a single-point state, got batch {state.batch_shape}")
 
 
-def strain_probes(state: HState, params: HParams, alpha_eps_deg, norm: float = DEFAULT_PROBE_NORM,
-                  allow_sliding: bool = True, shear: float = 0.0) -> ProbeResult:
-    """Strain probes d_eps = norm (cos a, sin a) in the (d_eps1, d_eps2) plane from ``state``.
+class _Response(NamedTuple):
+    """What every strain probe computes (``_responses``); rows as in ``ProbeResult``."""
 
-    ``shear`` adds d_eps12 = shear * norm to every probe (the paper's probes have none).
-    """
-    _check_state(state)
-    if not (np.isfinite(norm) and norm > 0):
-        raise ValueError(f"norm must be a finite |d_eps| > 0, got {norm!r}")
-    a = np.atleast_1d(np.asarray(alpha_eps_deg, dtype=float))
-    if not np.all(np.isfinite(a)):
-        raise ValueError("alpha_eps_deg must be finite angles in degrees")
+    alpha_eps: np.ndarray
+    d_eps: np.ndarray
+    dPi: np.ndarray
+    T2: np.ndarray
+    T3: np.ndarray
+    d_sigma: np.ndarray
+    alpha_sigma: np.ndarray
+    tr: np.ndarray
+    W2: np.ndarray
+    scale: np.ndarray
+    w2: np.ndarray
+    w2_sigma: np.ndarray
+
+
+class _Signs(NamedTuple):
+    """The part of a probe the sweep's refinement and the domain's check need."""
+
+    alpha_eps: np.ndarray
+    alpha_sigma: np.ndarray
+    w2: np.ndarray
+    w2_sigma: np.ndarray
+
+
+def _take(rows, idx):
+    """The rows ``idx`` of every field of a record of per-probe arrays."""
+    return type(rows)(*(np.asarray(f)[idx] for f in rows))
+
+
+def _concat(records):
+    """The records' rows, one after the other, field by field."""
+    return type(records[0])(*(np.concatenate([getattr(r, f) for r in records])
+                              for f in records[0]._fields))
+
+
+def _responses(state: HState, params: HParams, a, norm: float, allow_sliding: bool,
+               shear: float = 0.0):
+    """The update kernel's response to the strain probes in the directions ``a`` [deg] (checked
+    by the caller) from the single-point ``state``, each probe a point of its own, and the
+    normalized second-order works (Eq. 10, 38). Returns (``_Response``, kernel outputs in
+    ``_kernels.allocate_outputs`` order)."""
     n = a.size
     de = np.zeros((n, 3))
     de[:, 0] = norm * np.cos(np.radians(a))
     de[:, 1] = norm * np.sin(np.radians(a))
     de[:, 2] = shear * norm
-    d_eps = np.empty((2, 2, n))
-    d_eps[0, 0], d_eps[1, 1] = de[:, 0], de[:, 1]
-    d_eps[0, 1] = d_eps[1, 0] = de[:, 2]
-    inc = update_full(broadcast_state(state, (n,)), d_eps, params, allow_sliding=allow_sliding)
-    inc0 = update_full(state, np.zeros((2, 2)), params, allow_sliding=allow_sliding)
+    out = update_copies(state, de, params, allow_sliding=allow_sliding)
+    dPi, T3 = out[15], out[16]
     sigma = to_voigt(state.stress)[0]
     V = float(state.volume)
-    dPi = to_voigt(inc.dPi)
-    T3 = to_voigt(inc.T3)
     # dV/V = -(I - eps)^-T : d_eps, the first-order change of V = V0 det(I - eps) (spec); it is
     # -tr(d_eps) up to O(|eps|) terms (2 % at A), which matter for T2 to be the exact derivative
     Ainv = np.linalg.inv(np.eye(2) - state.eps)
@@ -118,22 +144,57 @@ def strain_probes(state: HState, params: HParams, alpha_eps_deg, norm: float = D
     W2 = V * _ddot(dPi, de)
     scale = V * _norm(dPi) * _norm(de)
     with np.errstate(divide="ignore", invalid="ignore"):
-        nrm = lambda x: x / scale
-        w2 = nrm(W2)
-        w2_sigma = nrm(V * _ddot(d_sigma, de))
-        w2_V = nrm(-V * tr * _ddot(sigma[None, :], de))
-        w2_g = nrm(-V * _ddot(T3, de))
-        w2n = nrm(inc.w2n)
-        w2t = nrm(inc.w2t)
-        w2_hex = nrm(inc.w2_micro_hex)
-    closed = ~inc.state.is_open
+        w2 = W2 / scale
+        w2_sigma = V * _ddot(d_sigma, de) / scale
+    return _Response(a, de, dPi, T2, T3, d_sigma, alpha_sigma_of(d_sigma), tr, W2, scale, w2,
+                     w2_sigma), out
+
+
+def _check_probe_args(state, a, norm):
+    _check_state(state)
+    if not (np.isfinite(norm) and norm > 0):
+        raise ValueError(f"norm must be a finite |d_eps| > 0, got {norm!r}")
+    a = np.atleast_1d(np.asarray(a, dtype=float))
+    if not np.all(np.isfinite(a)):
+        raise ValueError("alpha_eps_deg must be finite angles in degrees")
+    return a
+
+
+def strain_probes(state: HState, params: HParams, alpha_eps_deg, norm: float = DEFAULT_PROBE_NORM,
+                  allow_sliding: bool = True, shear: float = 0.0) -> ProbeResult:
+    """Strain probes d_eps = norm (cos a, sin a) in the (d_eps1, d_eps2) plane from ``state``.
+
+    ``shear`` adds d_eps12 = shear * norm to every probe (the paper's probes have none).
+    """
+    a = _check_probe_args(state, alpha_eps_deg, norm)
+    r, out = _responses(state, params, a, norm, allow_sliding, shear)
+    sig0 = update_copies(state, np.zeros((1, 3)), params, allow_sliding=allow_sliding)[12]
+    sigma = to_voigt(state.stress)[0]
+    V = float(state.volume)
+    sliding, is_open = out[10], out[11]
+    closed = ~is_open
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nrm = lambda x: x / r.scale
+        w2n = nrm(out[18])
+        w2t = nrm(out[19])
+        w2_hex = nrm(out[17])
+        w2_V = nrm(-V * r.tr * _ddot(sigma[None, :], r.d_eps))
+        w2_g = nrm(-V * _ddot(r.T3, r.d_eps))
     return ProbeResult(
-        alpha_eps=a, d_eps=de, d_sigma=d_sigma,
-        d_sigma_step=to_voigt(inc.stress) - to_voigt(inc0.stress)[0][None, :],
-        dPi=dPi, T2=T2, T3=T3, alpha_sigma=alpha_sigma_of(d_sigma), W2=W2,
-        w2=w2, w2_sigma=w2_sigma, w2_V=w2_V, w2_g=w2_g, w2_micro=w2n + w2t, w2n=w2n, w2t=w2t,
-        w2_hex=w2_hex, plastic=np.any(inc.state.sliding & closed, axis=-1),
-        n_sliding=np.sum(inc.state.sliding & closed, axis=-1), n_open=np.sum(inc.state.is_open, axis=-1))
+        alpha_eps=a, d_eps=r.d_eps, d_sigma=r.d_sigma, d_sigma_step=out[12] - sig0[0][None, :],
+        dPi=r.dPi, T2=r.T2, T3=r.T3, alpha_sigma=r.alpha_sigma, W2=r.W2,
+        w2=r.w2, w2_sigma=r.w2_sigma, w2_V=w2_V, w2_g=w2_g, w2_micro=w2n + w2t, w2n=w2n, w2t=w2t,
+        w2_hex=w2_hex, plastic=np.any(sliding & closed, axis=-1),
+        n_sliding=np.sum(sliding & closed, axis=-1), n_open=np.sum(is_open, axis=-1))
+
+
+def _signs(state: HState, params: HParams, alpha_eps_deg, norm: float = DEFAULT_PROBE_NORM,
+           allow_sliding: bool = True) -> _Signs:
+    """``strain_probes`` reduced to alpha_sigma, w2 and w2_sigma: the same numbers, computed by
+    the same ``_responses``, without the fields the sweep's refinement does not look at."""
+    a = _check_probe_args(state, alpha_eps_deg, norm)
+    r, _ = _responses(state, params, a, norm, allow_sliding)
+    return _Signs(a, r.alpha_sigma, r.w2, r.w2_sigma)
 
 
 def arcs(alpha_deg, mask) -> list:
@@ -177,11 +238,38 @@ def directional_sweep(state: HState, params: HParams, n: int = 360, norm: float 
     after ``max_rounds`` bisections of an interval (an interval of 360/n/2**30 deg is a jump of
     the response, not a missed direction). Sorted by alpha_eps in [0, 360).
     """
+    return _refine(lambda a: strain_probes(state, params, a, norm, allow_sliding), n, max_gap_deg,
+                   max_rounds)
+
+
+def w2_vanishes(state: HState, params: HParams, n: int = 360, norm: float = DEFAULT_PROBE_NORM,
+                max_gap_deg: float = 1.0, max_rounds: int = 30,
+                allow_sliding: bool = True) -> tuple[bool, bool]:
+    """Whether W2 (Eq. 10) and W2_sigma are <= 0 in some strain direction of
+    ``directional_sweep``'s probes: the bifurcation domain's check (Fig. 10). The same answer
+    as the minima of ``directional_sweep``, from the same probes: it computes only what its
+    refinement and the two signs need, and stops refining once both are <= 0 (a refinement
+    only adds probes, so it cannot undo that)."""
+    def both(r):
+        return bool(np.nanmin(r.w2) <= 0.0) and bool(np.nanmin(r.w2_sigma) <= 0.0)
+
+    r = _refine(lambda a: _signs(state, params, a, norm, allow_sliding), n, max_gap_deg, max_rounds,
+                enough=both)
+    return bool(np.nanmin(r.w2) <= 0.0), bool(np.nanmin(r.w2_sigma) <= 0.0)
+
+
+def _refine(probe, n, max_gap_deg, max_rounds, enough=None):
+    """The adaptive sweep of ``directional_sweep``: ``probe(alpha_eps)`` (a record of per-probe
+    arrays with ``alpha_eps`` and ``alpha_sigma``) on the grid of ``n`` directions, then at the
+    middle of every interval where alpha_sigma jumps by more than ``max_gap_deg``, for at most
+    ``max_rounds`` rounds or until ``enough(record)``. Sorted by alpha_eps."""
     if int(n) < 8:
         raise ValueError(f"n must be an integer >= 8 probe directions, got {n!r}")
-    res = strain_probes(state, params, 360.0 * np.arange(int(n)) / int(n), norm, allow_sliding)
+    res = probe(360.0 * np.arange(int(n)) / int(n))
     min_width = 360.0 / int(n) / 2.0 ** max_rounds
     for _ in range(max_rounds):
+        if enough is not None and enough(res):
+            break
         a = res.alpha_eps
         a_next = np.roll(a, -1)
         width = (a_next - a) % 360.0
@@ -190,9 +278,8 @@ def directional_sweep(state: HState, params: HParams, n: int = 360, norm: float 
         if not np.any(bad):
             break
         mids = (a[bad] + 0.5 * width[bad]) % 360.0
-        new = strain_probes(state, params, mids, norm, allow_sliding)
-        res = ProbeResult.concat([res, new])
-        res = res.take(np.argsort(res.alpha_eps, kind="stable"))
+        res = _concat([res, probe(mids)])
+        res = _take(res, np.argsort(res.alpha_eps, kind="stable"))
     return res
 
 
@@ -248,11 +335,11 @@ def stress_probes(state: HState, params: HParams, alpha_sigma_deg, sigma_norm: f
         lo = np.array([b[1] for b in brackets])
         w = np.array([b[2] for b in brackets])
         t = targets[ti]
-        s_lo = strain_probes(state, params, lo, norm, allow_sliding).alpha_sigma
+        s_lo = _signs(state, params, lo, norm, allow_sliding).alpha_sigma
         for _ in range(60):
             w = 0.5 * w
             mid = (lo + w) % 360.0
-            s_mid = strain_probes(state, params, mid, norm, allow_sliding).alpha_sigma
+            s_mid = _signs(state, params, mid, norm, allow_sliding).alpha_sigma
             # keep the half whose start is still on the low side of the target
             go_up = _wrap180(t - s_lo) * _wrap180(t - s_mid) > 0
             lo = np.where(go_up, mid, lo)

@@ -202,8 +202,8 @@ def cmd_burst(a):
     rows, s = run_burst(a.biaxial, a.out, a.ratios, a.start_fractions, _burst_options(a),
                         workers=a.workers, threads=a.threads, params_file=a.params,
                         stage=a.stage)
-    a.stage.wrote("burst.csv", "history.csv", "paths.csv", "summary.json", "fig_burst_c.png",
-                  "fig_burst_ke.png", "fig_burst_strain.png")
+    a.stage.wrote("params.json", "burst.csv", "history.csv", "paths.csv", "summary.json",
+                  "fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png")
     for r in rows:
         print(f"R = {r['ratio']:g}, f = {r['start_fraction']:g}, {r['switch']} (c = "
               f"{r['c_switch'] / 1e3:.2f} kPa + dc, eta {r['eta_switch']:.4f}): {r['outcome']} "

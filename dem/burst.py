@@ -392,13 +392,17 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     """Every proportional path (one per ratio and start fraction), then every switch of every
     path, each an independent run spread over ``workers`` local processes (one thread each;
     ``threads`` in a single process); writes ``out_dir``/burst.csv, history.csv, paths.csv,
-    summary.json and the figures. Returns (burst rows as dicts, summary dict)."""
+    summary.json, params.json and the figures. Returns (burst rows as dicts, summary dict)."""
     from .probes import _map, state_fingerprint
     opts.validate()
     ratios = [check_ratio(float(r)) for r in ratios]
     starts, eta_peak, params = load_starts(biaxial_dir, fractions, params_file)
     t0 = time.time()
     os.makedirs(out_dir, exist_ok=True)
+    # the parameters the run used, in the shared file format (``--params DIR/params.json``)
+    from .params import record_params
+    record_params(out_dir, params, f"python -m dem burst; parameters: the start states' own "
+                                   f"(--biaxial {biaxial_dir})")
     combos = [(r, f, st) for r in ratios for f, st, _ in starts]
     # a run in a pool of processes runs on one thread; alone in this process, on ``threads``
     # (None: dem.threads chooses)

@@ -70,6 +70,10 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     assert all(abs(x["c"] - (x["s1"] - 2.0 * x["s2"])) <= 1e-9 * abs(x["s1"]) for x in path)
     s = json.loads((out / "summary.json").read_text())
     assert s["options"]["dc"] == 100.0 and s["params"]["n"] == 300 and s["ratios"] == [-2.0]
+    # the run's parameters in the shared file format: the states' own, and --params takes them
+    from dem.params import DemParams, load_params
+    assert load_params(out / "params.json") == DemParams.from_dict(s["params"])
+    assert load_params(out / "params.json") == load_params(biaxial_300 / "params.json")
     for fig in ("fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png"):
         assert (out / fig).stat().st_size > 10_000
     assert "burst: " in capsys.readouterr().out

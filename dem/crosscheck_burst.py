@@ -75,7 +75,10 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
                       ratios=tuple(ratios), start_fractions=tuple(fractions), fields=False)
     f = fem_burst(cfg, fdir)
     fb = cfg.specimen
-    out["fem"] = {"rows": _rows(f.rows), "eta_peak": f.summary["material_point_drained_peak"]["eta"],
+    fem_keys = ("ratio", "start_fraction", "switch", "eta_start", "eta_peak_c", "fraction_peak_c",
+                "c_peak", "c_switch", "dc", "outcome", "ke_growth", "mp_eta_peak_c")
+    out["fem"] = {"rows": _rows(f.rows, fem_keys),
+                  "eta_peak": f.summary["material_point_drained_peak"]["eta"],
                   "histories": _csv_histories(os.path.join(fdir, "history.csv"), "ke",
                                               fb.width * fb.height)}
     if dem_biaxial_dir is not None:
@@ -112,6 +115,8 @@ def burst_conclusions(parts: dict, eta_first_w2: float | None, fem_events: dict 
                                        "fraction_peak_c": r["fraction_peak_c"], "outcomes": {},
                                        "ke_growth_past": None})
             d["outcomes"][r["switch"]] = r["outcome"]
+            if "mp_eta_peak_c" in r:       # the FE's: the material point with the FE's parameters
+                d["mp_eta_peak_c"] = r["mp_eta_peak_c"]
             if r["switch"] == "past":
                 d["ke_growth_past"] = r["ke_growth"]
         for d in paths.values():
@@ -213,8 +218,11 @@ def burst_report_lines(c: dict, fig: str | None) -> list:
         if pairs:
             L.append("\n**FE against the material point.** " + "; ".join(
                 f"R = {a['ratio']:g}, f = {a['start_fraction']:g}: c peak at eta {b['eta_peak_c']:.4f} "
-                f"(FE, its material with n_dir of the cross-check) and {a['eta_peak_c']:.4f} "
-                f"(material point, Table I)" for a, b in pairs) + ".")
+                f"(FE, its material with n_dir of the cross-check)"
+                + (f", {b['mp_eta_peak_c']:.4f} (the material point with the FE's parameters: the "
+                   f"perfect specimen is homogeneous, so the two are one path)"
+                   if b.get("mp_eta_peak_c") is not None else "")
+                + f" and {a['eta_peak_c']:.4f} (material point, Table I)" for a, b in pairs) + ".")
     if dm:
         L.append("\n**DEM.** " + "; ".join(
             f"R = {d['ratio']:g}, f = {d['start_fraction']:g}: "

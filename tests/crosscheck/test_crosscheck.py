@@ -163,7 +163,12 @@ def test_burst_section_failure_exactly_where_w2_vanishes_along_the_path(xc):
         assert d["ke_growth_past"] >= (10.0 if name == "dem" else 1e3), (name, d)
     hm = b["parts"]["hmodel"]["paths"][0]
     assert 0.0 <= hm["eta_peak_c"] - b["eta_first_w2"] <= 0.01
+    # the perfect FE specimen is homogeneous: its c peak is the material point's with the FE's
+    # parameters (n_dir of the cross-check) to round-off, and the report says so beside Table I's
+    fe = b["parts"]["fem"]["paths"][0]
+    assert abs(fe["eta_peak_c"] - fe["mp_eta_peak_c"]) <= 1e-9
     rep = (out / "report.md").read_text()
+    assert f"{fe['mp_eta_peak_c']:.4f} (the material point with the FE's parameters" in rep
     assert "## Failure made to happen" in rep and "(fig_burst_ke.png)" in rep
     assert (out / "fig_burst_ke.png").stat().st_size > 20_000
     for part in ("fem", "dem"):

@@ -10,6 +10,17 @@ N_DIR = 36
 D_EPS1 = 5e-4
 
 
+@pytest.fixture
+def no_computation(monkeypatch):
+    """Every runner of ``python -m fem`` fails loudly: validation must come first."""
+    import fem.__main__ as fcli
+
+    def boom(*a, **k):
+        raise AssertionError("computation started before the options were validated")
+    for name in ("run_biaxial", "run_burst", "compile_kernels"):
+        monkeypatch.setattr(fcli, name, boom)
+
+
 @pytest.fixture(scope="session")
 def params36():
     return HParams(n_dir=N_DIR)

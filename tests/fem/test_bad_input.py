@@ -14,14 +14,6 @@ from hmodel.io import file_mode
 from tests._interrupt import interrupt_after
 
 
-@pytest.fixture
-def no_computation(monkeypatch):
-    def boom(*a, **k):
-        raise AssertionError("computation started before the options were validated")
-    monkeypatch.setattr(fcli, "run_biaxial", boom)
-    monkeypatch.setattr(fcli, "compile_kernels", boom)
-
-
 @pytest.fixture(scope="module")
 def bad_mesh_files(tmp_path_factory):
     d = tmp_path_factory.mktemp("meshes")

@@ -50,7 +50,8 @@ import numpy as np
 
 from hmodel.burst import check_ratio
 
-from .settle import SettleRule, settle, voigt_strain
+from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS, Ledger
+from .settle import RULE_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .threads import ThreadChooser
 from .walls import strain_rate, tied
@@ -58,17 +59,24 @@ from .walls import strain_rate, tied
 SWITCHES = ("below", "past")
 UNLOADED = 0.05        # a path whose mean wall stress falls below this of its start has unloaded
 
+# a path's records, then its energy ledger from the path's start (first order: the second-order
+# terms of a path are not the experiment's)
+PATH_LEDGER_COLUMNS = ["ke", "w_ext", "w_int", "w_damp", "e_elastic", "d_slip", "d_roll",
+                       "balance_residual", "split_residual"]
 PATH_COLUMNS = ["ratio", "start_fraction", "step", "eps1", "eps2", "s1", "s2", "p", "q", "eta",
-                "c", "unbalanced"]
+                "c", "unbalanced"] + PATH_LEDGER_COLUMNS
+# the ledger's columns (dem.ledger) but its "ke", which is the "ke" column already there
+HOLD_LEDGER_COLUMNS = [c for c in LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS if c != "ke"]
 HISTORY_COLUMNS = ["ratio", "start_fraction", "switch", "step", "t", "eps1", "eps2", "c",
                    "c_target", "stress_error", "ke", "ke_backbone", "unbalanced", "s1", "s2",
-                   "strain_ratio", "w2_ext", "w2_walls", "w2_int"]
+                   "strain_ratio", "w2_ext_held", "w2_walls", "w2_int_secant"] + HOLD_LEDGER_COLUMNS
 BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction_peak_c",
                  "eps1_peak_c", "c_start", "c_peak", "peak_confirmed_by", "switch",
                  "eta_switch", "eps1_switch", "c_switch", "dc", "c_target", "outcome",
                  "ke_growth", "ke_max", "ke_backbone_max", "w2_ext_end", "w2_walls_end",
                  "w2_int_end", "t_end", "steps", "de1_end", "de2_end", "creep_rate",
-                 "unbalanced_end", "path_steps", "n_disks"]
+                 "unbalanced_end", "path_steps", "n_disks", "w2_ext_held_end",
+                 "w2_int_secant_end", "w_damp_end", "u0_end", "eq1_residual"]
 
 
 class BurstOptions(NamedTuple):
@@ -163,13 +171,14 @@ class PathResult(NamedTuple):
 
 def _record(sim, ratio):
     """One path record: step, eps1, eps2, s1, s2, p, q, eta, c, unbalanced (compression
-    positive, axis 1 = y)."""
+    positive, axis 1 = y), then the ledger's PATH_LEDGER_COLUMNS."""
     snap = sim.snapshot()
     s2, s1 = sim.wall_stress(snap)
     e2, e1 = sim.strain()
     p, q = 0.5 * (s1 + s2), s1 - s2
+    led = sim.ledger.read()
     return [sim.step, e1, e2, s1, s2, p, q, q / p if p > 0 else math.nan, s1 + ratio * s2,
-            sim.unbalanced(snap)]
+            sim.unbalanced(snap)] + [getattr(led, c) for c in PATH_LEDGER_COLUMNS]
 
 
 def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOptions(),
@@ -185,6 +194,7 @@ def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOpti
     if threads is not None:
         sim.threads = ThreadChooser(sim.n, threads)
     sim.set_control(strain_rate(ratio * opts.rate, opts.rate, sim.ref_len))
+    Ledger(sim)
     every = max(1, int(round(opts.record_strain / (opts.rate * sim.dt))))
     rows = [_record(sim, ratio)]
     e_start, c_start, p_start = rows[0][1], rows[0][8], rows[0][5]
@@ -217,6 +227,9 @@ def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOpti
         peak = None
         switches = {"below": (len(rows) - 1, sim.state())}
     return PathResult(rows, peak, how, switches, sim.step - state.step, time.time() - t0)
+
+
+H = {c: k for k, c in enumerate(HISTORY_COLUMNS[3:])}    # a hold's history columns (from "step")
 
 
 class HoldResult(NamedTuple):
@@ -304,13 +317,17 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
     d_g = sim.size[0] * sim.params.thickness * (c_target - c_switch)     # dG [N]
     h0 = sim.ref_len[1]
     sim.set_control(tied(ratio, c_target, c_target, sim.step, 0, sim.ref_len))
+    Ledger(sim)
     hist = []
+    led = [len(RULE_COLUMNS) + k for k, c in enumerate(LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS)
+           if c != "ke"]      # settle's row: the rule's columns, then the ledger's
 
     def check(steps, row):
-        step, ke, keb, ub, e1, e2, s1_, s2_, err, ratio_ = row
+        step, ke, keb, ub, e1, e2, s1_, s2_, err, ratio_ = row[:len(RULE_COLUMNS)]
         hist.append([step - step0, (step - step0) * sim.dt, e1, e2, s1_ + ratio * s2_, c_target,
                      err, ke, keb, ub, s1_, s2_, ratio_, d_g * h0 * (e1 - eps1_0),
-                     wall_work(sim, g0, walls0), contact_work(c0, contact_table(sim))])
+                     wall_work(sim, g0, walls0), contact_work(c0, contact_table(sim))]
+                    + [row[k] for k in led])
         if progress:
             progress(steps, hist[-1])
 
@@ -480,8 +497,11 @@ def burst_row(ratio, fraction, switch, path: PathResult, run: HoldResult, opts, 
             "eta_switch": pr[k_sw, 7], "eps1_switch": pr[k_sw, 1], "c_switch": pr[k_sw, 8],
             "dc": opts.dc, "c_target": pr[k_sw, 8] + opts.dc, "outcome": run.outcome,
             "ke_growth": ke_growth(h[:, 8]), "ke_max": float(h[:, 7].max()),
-            "ke_backbone_max": float(h[:, 8].max()), "w2_ext_end": h[-1, 13],
-            "w2_walls_end": h[-1, 14], "w2_int_end": h[-1, 15], "t_end": h[-1, 1],
+            "ke_backbone_max": float(h[:, 8].max()), "w2_ext_end": h[-1, H["w2_ext"]],
+            "w2_walls_end": h[-1, H["w2_walls"]], "w2_int_end": h[-1, H["w2_int"]],
+            "t_end": h[-1, 1], "w2_ext_held_end": h[-1, H["w2_ext_held"]],
+            "w2_int_secant_end": h[-1, H["w2_int_secant"]], "w_damp_end": h[-1, H["w_damp"]],
+            "u0_end": h[-1, H["u0"]], "eq1_residual": float(np.max(h[:, H["eq1_residual"]])),
             "steps": run.steps,
             "de1_end": h[-1, 2] - h[0, 2], "de2_end": h[-1, 3] - h[0, 3],
             "creep_rate": run.creep_rate, "unbalanced_end": h[-1, 9],

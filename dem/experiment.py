@@ -18,11 +18,16 @@ import numpy as np
 from . import io
 from .params import DemParams, record_params
 from .sample import compact
+from .ledger import Ledger
 from .simulation import Simulation
 from .walls import biaxial
 
+# a record, then the energy ledger of the test since its start (dem.ledger; first order: the
+# test's second-order terms are not the experiment's)
+LEDGER_COLUMNS = ["ke", "w_ext", "w_int", "w_damp", "e_elastic", "d_slip", "d_roll",
+                  "balance_residual", "split_residual"]
 COLUMNS = ["step", "time", "eps1", "eps2", "eps_v", "s1", "s2", "p", "q", "eta",
-           "s1_lw", "s2_lw", "unbalanced", "porosity", "coordination"]
+           "s1_lw", "s2_lw", "unbalanced", "porosity", "coordination"] + LEDGER_COLUMNS
 
 
 class BiaxialResult(NamedTuple):
@@ -42,8 +47,10 @@ def record(sim: Simulation):
     p = 0.5 * (s1 + s2)
     q = s1 - s2
     coord = 2.0 * len(snap.ci) / sim.n
+    led = sim.ledger.read() if sim.ledger is not None else None
     return [sim.step, sim.time, e1, e2, e1 + e2, s1, s2, p, q, q / p if p > 0 else 0.0,
-            lw[1, 1], lw[0, 0], sim.unbalanced(snap), sim.porosity(), coord]
+            lw[1, 1], lw[0, 0], sim.unbalanced(snap), sim.porosity(), coord] + [
+                getattr(led, c) if led else math.nan for c in LEDGER_COLUMNS]
 
 
 def _progress(msg):
@@ -101,6 +108,11 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
         st, info = io.load_state(ck_path)
         sim = Simulation(st)
         rows = info.pop("rows")
+        if "arrays" in info:
+            Ledger.from_arrays(sim, info.pop("arrays"))
+        elif verbose:       # a checkpoint of a version before the ledger: its columns stay NaN
+            _progress(f"[biaxial] {ck_path} has no energy ledger (an older version's): the "
+                      "ledger's columns of biaxial.csv stay empty (NaN)")
         if verbose:
             _progress(f"[biaxial] resumed from {ck_path} at step {sim.step}, {len(rows)} rows")
     else:
@@ -114,6 +126,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
                       meta={"compaction": info["compaction"]})
         sim.ref_len = sim.size.copy()
         sim.set_control(biaxial(confining, rate, sim.ref_len))
+        Ledger(sim)     # from the start of the drained test (the compaction grows the radii)
         info.update(eta_a_reached=False, q_max=-1e300, eps_peak=0.0, eta_max=-1e300)
         rows.append(record(sim))
     rec_steps = max(1, int(round(record_strain / (rate * sim.dt))))
@@ -164,7 +177,8 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
             # the wall time so far goes with the checkpoint, so a resumed run reports the total
             io.save_state(ck_path, sim.state(), meta=dict(
                 info, rows=rows,
-                wall_time_before=info.get("wall_time_before", 0.0) + time.time() - t_start))
+                wall_time_before=info.get("wall_time_before", 0.0) + time.time() - t_start),
+                arrays=sim.ledger.to_arrays())
             io.write_csv(os.path.join(out_dir, "biaxial.csv"), COLUMNS, rows)
         if done:
             break

@@ -61,8 +61,10 @@ def atomic_write_bytes(path, data: bytes):
         raise
 
 
-def save_state(path, state: State, meta: dict | None = None):
-    """Write a complete State to `path` (npz) atomically."""
+def save_state(path, state: State, meta: dict | None = None, arrays: dict | None = None):
+    """Write a complete State to `path` (npz) atomically; ``arrays``: named arrays that go with
+    it in the same file (a checkpoint's energy ledger), read back by ``load_state`` under
+    ``meta["arrays"]``."""
     c = state.control
     buf = _io.BytesIO()
     np.savez(buf, format=np.array(FORMAT), format_version=np.array(FORMAT_VERSION),
@@ -76,7 +78,8 @@ def save_state(path, state: State, meta: dict | None = None):
              ctrl_s_to=np.asarray(c.s_to, float),
              ctrl_ramp=np.array([c.ramp_start, c.ramp_len], np.int64),
              ctrl_rate=np.asarray(c.rate, float), ctrl_len0=np.asarray(c.len0, float),
-             ctrl_ratio=np.array(float(c.ratio)), ref_len=state.ref_len, meta=np.array(json.dumps(meta or {})))
+             ctrl_ratio=np.array(float(c.ratio)), ref_len=state.ref_len, meta=np.array(json.dumps(meta or {})),
+             **{"array_" + k: v for k, v in (arrays or {}).items()})
     atomic_write_bytes(path, buf.getvalue())
 
 
@@ -138,6 +141,9 @@ def load_state(path) -> tuple[State, dict]:
                float(d["mu_r"]), bool(d["cap_on"]),
                ctrl, d["ref_len"])
     meta = json.loads(str(d["meta"])) if "meta" in d else {}
+    extra = {k[len("array_"):]: v for k, v in d.items() if k.startswith("array_")}
+    if extra:
+        meta["arrays"] = extra
     return st, meta
 
 

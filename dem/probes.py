@@ -27,6 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .ledger import Ledger, max_eq1_residual
 from .settle import HISTORY_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .threads import ThreadChooser
@@ -101,6 +102,7 @@ def prepare_reference(state: State, opts: ProbeOptions = ProbeOptions(), verbose
     if threads is not None:
         sim.threads = ThreadChooser(sim.n, threads)
     sim.cap_on = True
+    Ledger(sim)
     s = sim.wall_stress()
     sim.set_control(stress_path(s, s, sim.step, 0))
     last = [time.time()]
@@ -120,6 +122,7 @@ def prepare_reference(state: State, opts: ProbeOptions = ProbeOptions(), verbose
     rule = opts.rule(opts.relax_max_steps)._replace(fail_ratio=math.inf, runaway_ratio=math.inf,
                                                     fail_strain=RELAX_FAIL_STRAIN)
     res = settle(sim, s, rule, strain_scale=voigt_strain(sim, opts.norm), progress=progress)
+    sim.ledger.detach()
     return sim.state(), res
 
 
@@ -166,14 +169,18 @@ def _contacts(snap, x):
 
 
 def run_probe(state: State, alpha_deg: float, sliding: bool, opts: ProbeOptions = ProbeOptions(),
-              threads: int | None = 1, de_elastic: float | None = None) -> dict:
+              threads: int | None = 1, de_elastic: float | None = None, ledger=True) -> dict:
     """One stress probe from `state` (an equilibrium state), decided by ``dem.settle``.
     ``de_elastic``: |de| of the elastic probe of this direction (its failure rules use it;
-    without it the strain ratio is taken against ``voigt_strain``).  See the module doc."""
+    without it the strain ratio is taken against ``voigt_strain``).  ``ledger``: keep the
+    energy ledger from the probe's start (``dem.ledger``; its columns in the history, NaN
+    without it; it does not change the run's bits).  See the module doc."""
     sim = Simulation(state)
     if threads is not None:
         sim.threads = ThreadChooser(sim.n, threads)
     sim.cap_on = bool(sliding)
+    if ledger:
+        Ledger(sim)
     snap0, s0, len0 = _axes(sim)
     x0 = sim.x.copy()
     walls0 = sim.walls.copy()
@@ -236,6 +243,7 @@ def run_probe(state: State, alpha_deg: float, sliding: bool, opts: ProbeOptions 
                # Eq. 1 over the probe: the external second-order work V ds.de [J] against
                # the change of kinetic energy [J] (a failure turns the first into the second)
                d2_work=float(vol0 * (dsig @ deps)), d_kinetic_energy=sim.kinetic_energy() - ke0,
+               eq1_residual=max_eq1_residual(st.history, HISTORY_COLUMNS),
                n_contacts_R=len(c0), n_contacts_end=len(c1),
                n_created=len(set(c1) - set(c0)), n_lost=len(set(c0) - set(c1)),
                history=st.history.tolist())
@@ -246,7 +254,7 @@ COLUMNS = ["alpha_sigma", "outcome", "w2", "w2_micro", "w2n", "w2t", "w2_unbalan
            "plastic", "ds1", "ds2", "de1", "de2", "de1_elastic", "de2_elastic", "de_plastic_ratio",
            "w2_elastic", "strain_ratio", "ke_peak", "creep_rate", "d2_work", "d_kinetic_energy",
            "outcome_elastic", "converged", "converged_elastic", "steps", "steps_elastic",
-           "unbalanced", "n_contacts_R", "n_created", "n_lost"]
+           "unbalanced", "n_contacts_R", "n_created", "n_lost", "eq1_residual"]
 HISTORY_FILE_COLUMNS = ["alpha_sigma", "sliding"] + HISTORY_COLUMNS
 
 
@@ -472,6 +480,11 @@ def combine(results, opts: ProbeOptions):
                                  "strain_ratio", "ke_peak", "creep_rate", "d2_work",
                                  "d_kinetic_energy", "converged", "steps", "unbalanced",
                                  "n_contacts_R", "n_created", "n_lost", "history")}
+        # the largest Eq. 1 residual of the direction's two runs (NaN for runs of a checkpoint
+        # written before the ledger)
+        got = [v for v in (t.get("eq1_residual"), e.get("eq1_residual"))
+               if v is not None and not math.isnan(v)]
+        row["eq1_residual"] = max(got) if got else math.nan
         row.update(plastic=int(ratio > opts.plastic_tol), de1_elastic=e["de1"],
                    de2_elastic=e["de2"], de_plastic_ratio=ratio, w2_elastic=e["w2"],
                    outcome_elastic=e["outcome"], converged_elastic=e["converged"],
@@ -488,9 +501,12 @@ def csv_rows(rows):
 def history_rows(rows):
     """Every check of every run, for ``probe_histories.csv`` (HISTORY_FILE_COLUMNS)."""
     out = []
+    width = len(HISTORY_COLUMNS)
     for r in rows:
         for sliding, key in ((1, "history"), (0, "history_elastic")):
-            out += [[r["alpha_sigma"], sliding] + list(h) for h in r[key]]
+            # a run of a checkpoint from before the ledger has only the rule's columns
+            out += [[r["alpha_sigma"], sliding] + list(h) + [math.nan] * (width - len(h))
+                    for h in r[key]]
     return out
 
 

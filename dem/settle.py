@@ -38,8 +38,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-HISTORY_COLUMNS = ["step", "kinetic_energy", "kinetic_energy_backbone", "unbalanced",
-                   "eps1", "eps2", "s1", "s2", "stress_error", "strain_ratio"]
+from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS
+
+# a check's row: the rule's columns, then the energy ledger's (dem.ledger; NaN when the run has
+# no ledger attached)
+RULE_COLUMNS = ["step", "kinetic_energy", "kinetic_energy_backbone", "unbalanced",
+                "eps1", "eps2", "s1", "s2", "stress_error", "strain_ratio"]
+HISTORY_COLUMNS = RULE_COLUMNS + LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS
 OUTCOMES = ("equilibrium", "failure", "undecided")
 
 
@@ -95,7 +100,7 @@ class Settled(NamedTuple):
     ke_peak_backbone: float     # largest backbone kinetic energy seen [J]
     strain_ratio: float         # |de| / elastic scale at the end
     creep_rate: float           # |d eps| / dt over the last window [1/s]
-    history: np.ndarray         # (checks, len(HISTORY_COLUMNS))
+    history: np.ndarray         # (checks, len(HISTORY_COLUMNS)): the rule's, then the ledger's
 
 
 def backbone_kinetic_energy(sim, snap):
@@ -144,7 +149,7 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
                float(np.max(np.abs(np.array([sx, sy]) - target))))
         ratio = float(np.linalg.norm(de) / el) if el else math.nan
         hist.append([sim.step, sim.kinetic_energy(), backbone_kinetic_energy(sim, snap), ub,
-                     de[0] + eps0[0], de[1] + eps0[1], sy, sx, err, ratio])
+                     de[0] + eps0[0], de[1] + eps0[1], sy, sx, err, ratio] + ledger_row(sim))
         if progress:
             progress(steps, hist[-1])
         outcome = _decide(np.asarray(hist[-(w_checks + 1):]), de, ratio, rule, sim.n,
@@ -161,6 +166,14 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
         k = min(rule.check_every, rule.max_steps - steps)
         sim.run(k)
         steps += k
+
+
+def ledger_row(sim) -> list:
+    """The energy ledger's columns (``LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS``) of ``sim`` now, or
+    NaN where no ledger is attached."""
+    if sim.ledger is None:
+        return [math.nan] * (len(LEDGER_COLUMNS) + len(LEDGER_EXTRA_COLUMNS))
+    return sim.ledger.read().row()
 
 
 def _decide(win, de, ratio, rule, n, w_checks, strain_scale):

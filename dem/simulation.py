@@ -44,6 +44,10 @@ class State(NamedTuple):
     ref_len: np.ndarray    # (2,) (W0, H0) reference lengths for strains [m]
 
 
+# the ledger's arrays when it is off (``kernels.advance``: an empty lsc turns it off)
+_NO_LEDGER = (np.zeros(0), np.zeros((6, 0)), np.zeros((0, 3)))
+
+
 class Snapshot(NamedTuple):
     """Contacts and derived measures at one configuration (see kernels.contact_snapshot)."""
     ci: np.ndarray
@@ -95,6 +99,8 @@ class Simulation:
         # bits are the same either way); a test may force any number
         self.nblocks = None
         self.threads = ThreadChooser(n)
+        # the energy ledger (dem.ledger.Ledger attaches itself here); it only reads the run
+        self.ledger = None
 
     # ------------------------------------------------------------------------------
     @classmethod
@@ -155,7 +161,8 @@ class Simulation:
                 p.rolling_stiffness * p.kt, self.mu_r, self.damping,
                 self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
                 self.vmax_override or p.servo_vmax,
-                0.5 * p.skin, nblocks, ratio)
+                0.5 * p.skin, nblocks, ratio, *(self.ledger.arrays() if self.ledger is not None
+                                                 else _NO_LEDGER))
             self.threads.record(nth, done * self.n, time.perf_counter() - t0)
             left -= done
             self.step += done

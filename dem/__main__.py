@@ -186,28 +186,38 @@ def _ratios(text):
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _burst_options(a):
+def _burst_options(a, n_disks=None):
     from .burst import BurstOptions
-    return BurstOptions(rate=a.rate, path_strain=a.path_strain, peak_drop=a.peak_drop,
-                        peak_strain=a.peak_strain, below_rise=a.below_rise, dc=a.dc,
-                        unbalanced_tol=a.unbalanced_tol, stress_tol=a.stress_tol,
-                        strain_tol=a.strain_tol, ke_tol=a.ke_tol, window=a.window,
-                        max_steps=a.max_steps, fail_strain=a.fail_strain).validate()
+    try:
+        return BurstOptions(rate=a.rate, path_strain=a.path_strain, peak_drop=a.peak_drop,
+                            peak_strain=a.peak_strain, below_rise=a.below_rise, dc=a.dc,
+                            unbalanced_tol=a.unbalanced_tol, stress_tol=a.stress_tol,
+                            strain_tol=a.strain_tol, ke_tol=a.ke_tol, window=a.window,
+                            max_steps=a.max_steps, fail_strain=a.fail_strain, hold=a.hold,
+                            wall_mass=a.wall_mass, wall_period_steps=a.wall_period_steps,
+                            relax_max_steps=a.relax_max_steps).validate(n_disks)
+    except ValueError as e:       # name the option as the command line spells it
+        msg = str(e)
+        name = msg.split("=", 1)[0]
+        raise ValueError(f"--{name.replace('_', '-')}{msg[len(name):]}") from None
 
 
 def cmd_burst(a):
     from .burst import run_burst
     _threads(a)
     t0 = time.time()
-    rows, s = run_burst(a.biaxial, a.out, a.ratios, a.start_fractions, _burst_options(a),
+    rows, s = run_burst(a.biaxial, a.out, a.ratios, a.start_fractions, a.burst_options,
                         workers=a.workers, threads=a.threads, params_file=a.params,
-                        stage=a.stage)
-    a.stage.wrote("params.json", "burst.csv", "history.csv", "paths.csv", "summary.json",
-                  "fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png")
+                        stage=a.stage, resume=a.resume, scheduler=a.scheduler)
+    a.stage.wrote("params.json", "burst.csv", "history.csv", "paths.csv", "rest.csv",
+                  "summary.json", "fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png",
+                  "fig_burst_ledger.png")
     for r in rows:
-        print(f"R = {r['ratio']:g}, f = {r['start_fraction']:g}, {r['switch']} (c = "
-              f"{r['c_switch'] / 1e3:.2f} kPa + dc, eta {r['eta_switch']:.4f}): {r['outcome']} "
-              f"after {r['steps']} steps, backbone kinetic energy x{r['ke_growth']:.3g}")
+        print(f"R = {r['ratio']:g}, f = {r['start_fraction']:g}, {r['switch']} (c at rest "
+              f"{r['c_switch'] / 1e3:.2f} kPa, loaded {r['c_loaded'] / 1e3:.2f} kPa, + dc, eta "
+              f"{r['eta_switch']:.4f}, {r['hold'].replace('_', ' ')}): {r['outcome']} after "
+              f"{r['steps']} steps, backbone kinetic energy x{r['ke_growth']:.3g}, W2_int at the "
+              f"end {r['w2_int_end']:.3g} J, Eq. 1 residual {r['eq1_residual']:.1e}")
     print(f"burst: {len(rows)} runs -> {os.path.join(a.out, 'burst.csv')}, history.csv, "
           f"paths.csv, figures; wall time {time.time() - t0:.1f} s")
 
@@ -376,8 +386,25 @@ def build_parser() -> opt.Parser:
                    help="c this far below its largest confirms the peak [Pa]")
     u.add_argument("--peak-strain", type=opt.real(0, 0.5), default=5e-3,
                    help="or the path this far beyond the largest c [-]")
-    u.add_argument("--below-rise", type=opt.real(0, 1, lo_open=False), default=0.5,
-                   help="below: the first state with c >= c_start + this (c_peak - c_start)")
+    u.add_argument("--below-rise", type=opt.real(0, 1), default=0.5,
+                   help="below: the first state whose c at rest reaches c_start + this "
+                        "(c_peak - c_start), at rest (0 < below-rise < 1)")
+    u.add_argument("--hold", choices=("dead_load", "servo"), default="dead_load",
+                   help="how G is held after the switch: a dead load on the tied walls (one "
+                        "dynamic degree of freedom, no servo) or the servo on c")
+    u.add_argument("--wall-mass", type=opt.real(0), default=None,
+                   help="the walls' generalized mass m_G under the dead load [kg] (default: the "
+                        "rule, their period on their contacts = --wall-period-steps steps)")
+    u.add_argument("--wall-period-steps", type=opt.real(20, lo_open=False), default=200.0,
+                   help="the wall-mass rule: the walls' period on their contact stiffness in "
+                        "time steps (>= 20)")
+    u.add_argument("--relax-max-steps", type=opt.integer(1), default=1_000_000,
+                   help="cap of a relaxation at fixed strain [steps] (at least two equilibrium "
+                        "windows)")
+    u.add_argument("--resume", action="store_true",
+                   help="keep the paths, relaxations and holds already in DIR/burst_runs.jsonl")
+    u.add_argument("--scheduler", default=None,
+                   help="dask.distributed scheduler address: the runs go to its workers")
     u.add_argument("--max-steps", type=opt.integer(1), default=1_000_000,
                    help="cap of a switched run [steps]: undecided when reached")
     u.add_argument("--fail-strain", type=opt.real(0, 1), default=0.01,
@@ -502,7 +529,8 @@ def main(argv=None):
         if getattr(a, "hmodel_params", None):
             from hmodel.params import load_params as load_hparams
             load_hparams(a.hmodel_params, option="--hmodel-params")
-        if a.cmd in ("probes", "domain", "calibrate", "crosscheck") and a.scheduler and a.workers:
+        if (a.cmd in ("probes", "domain", "calibrate", "crosscheck", "burst") and a.scheduler
+                and a.workers):
             raise opt.OptionError("--workers and --scheduler: allowed one of them")
         if getattr(a, "scheduler", None):
             from .probes import check_scheduler
@@ -524,7 +552,8 @@ def main(argv=None):
         if a.cmd == "burst":
             from .burst import load_starts
             _burst_options(a)         # bad options and input files before the compilation
-            load_starts(a.biaxial, a.start_fractions, a.params)
+            _, _, own = load_starts(a.biaxial, a.start_fractions, a.params)
+            a.burst_options = _burst_options(a, own.n)
         elif getattr(a, "biaxial", None):
             from .domain import load_states
             load_states(a.biaxial, [s for s in (getattr(a, "states", None) or "").split(",") if s])

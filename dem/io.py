@@ -2,18 +2,22 @@
 temporary file in the target directory and is moved in place with os.replace, so an
 interrupted run never leaves a half-written file under the final name.
 
-State file format (npz, FORMAT_VERSION = 3), arrays:
+State file format (npz, FORMAT_VERSION = 4), arrays:
   format ("dem-state"), format_version (int), params (JSON of DemParams),
   x, v (N,2), w, theta, r (N,), walls, walls_ref, prev (4,), x_ref (N,2),
   pi, pj (P,) int32, ft (P,), mr (P,) rolling-moment history, step, time, mu, mu_r, cap_on,
   ctrl_mode (2,), ctrl_s_from, ctrl_s_to (2,), ctrl_ramp (2,) [start, len], ctrl_rate,
-  ctrl_len0 (2,), ctrl_ratio (R of the tied control), ref_len (2,), meta (JSON, free-form).
+  ctrl_len0 (2,), ctrl_ratio (R of the tied controls), ctrl_wall_mass (the walls' generalized
+  mass under a dead load), ref_len (2,), meta (JSON, free-form), and any named arrays saved with
+  it (``array_<name>``: a checkpoint's energy ledger).
 Version 1 (before rolling resistance) is still read: no mr, mu_r, and params without
 rolling_friction / rolling_stiffness; it loads as a state without rolling resistance
 (rolling_friction 0, rolling_stiffness its default, mr and mu_r zero), which is what it was.
 Versions 1 and 2 (before the tied control) have no ctrl_ratio: it loads as 0, the value of
 every control but the tied one.  (The version was raised so that code older than the tied
 control refuses a file saved under it rather than running its mode 2 as strain control.)
+Versions 1-3 (before the dead load) have no ctrl_wall_mass: it loads as 0, the value of every
+control but the dead load (version 4, so that older code refuses a state saved under it).
 """
 from __future__ import annotations
 
@@ -31,8 +35,8 @@ from .simulation import State, Simulation
 from .walls import Control
 
 FORMAT = "dem-state"
-FORMAT_VERSION = 3
-READ_VERSIONS = (1, 2, 3)
+FORMAT_VERSION = 4
+READ_VERSIONS = (1, 2, 3, 4)
 # what a version-1 file's params lacked: the values its runs had
 V1_PARAMS = {"rolling_friction": 0.0, "rolling_stiffness": 1.0}
 
@@ -78,7 +82,8 @@ def save_state(path, state: State, meta: dict | None = None, arrays: dict | None
              ctrl_s_to=np.asarray(c.s_to, float),
              ctrl_ramp=np.array([c.ramp_start, c.ramp_len], np.int64),
              ctrl_rate=np.asarray(c.rate, float), ctrl_len0=np.asarray(c.len0, float),
-             ctrl_ratio=np.array(float(c.ratio)), ref_len=state.ref_len, meta=np.array(json.dumps(meta or {})),
+             ctrl_ratio=np.array(float(c.ratio)), ctrl_wall_mass=np.array(float(c.wall_mass)),
+             ref_len=state.ref_len, meta=np.array(json.dumps(meta or {})),
              **{"array_" + k: v for k, v in (arrays or {}).items()})
     atomic_write_bytes(path, buf.getvalue())
 
@@ -123,6 +128,8 @@ def load_state(path) -> tuple[State, dict]:
         raise ValueError(f"state file {path}: not a DEM state (missing ['mr', 'mu_r'])")
     if ver >= 3 and "ctrl_ratio" not in d:
         raise ValueError(f"state file {path}: not a DEM state (missing ['ctrl_ratio'])")
+    if ver >= 4 and "ctrl_wall_mass" not in d:
+        raise ValueError(f"state file {path}: not a DEM state (missing ['ctrl_wall_mass'])")
     params = DemParams.from_dict(pd)
     n = len(d["r"])
     for k in ("x", "v", "x_ref"):
@@ -134,7 +141,8 @@ def load_state(path) -> tuple[State, dict]:
                    tuple(map(float, d["ctrl_s_to"])), int(d["ctrl_ramp"][0]),
                    int(d["ctrl_ramp"][1]), tuple(map(float, d["ctrl_rate"])),
                    tuple(map(float, d["ctrl_len0"])),
-                   float(d["ctrl_ratio"]) if ver >= 3 else 0.0)
+                   float(d["ctrl_ratio"]) if ver >= 3 else 0.0,
+                   float(d["ctrl_wall_mass"]) if ver >= 4 else 0.0)
     st = State(params, d["x"], d["v"], d["w"], d["theta"], d["r"], d["walls"], d["walls_ref"],
                d["prev"], d["x_ref"], d["pi"].astype(np.int32), d["pj"].astype(np.int32),
                d["ft"], d["mr"], int(d["step"]), float(d["time"]), float(d["mu"]),

@@ -314,11 +314,13 @@ def wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK, fw):
 # --------------------------------------------------------------------------------------
 @njit(**FAST)
 def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thickness,
-                gain, smoothing, vmax, dt, ratio):
+                gain, smoothing, vmax, dt, ratio, wall_mass):
     """Move the walls for one step.
 
     mode (2,): per axis (0 = x walls, 1 = y walls) 0 = stress control, 1 = strain rate, or
-    both 2 = tied (``_servo_tied``; ``ratio`` = R, used by it only).
+    both 2 = tied (``_servo_tied``; ``ratio`` = R, used by it only), or both 3 = tied under a
+    dead load (``_dead_load``: the held force s_to[1] [N], the walls' generalized mass
+    ``wall_mass`` [kg]).
     Stress target = s_from + (s_to - s_from) * ramp_t (compression positive) [Pa].
     Stress control: inward displacement gain * (F_target - F) / sum(k_contacts), clipped to
     vmax*dt and smoothed with the previous one (prev (4,) is updated).
@@ -327,6 +329,9 @@ def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thi
     if mode[1] == 2:
         _servo_tied(walls, wF, wK, s_from[1] + (s_to[1] - s_from[1]) * ramp_t, len0, prev,
                     thickness, gain, smoothing, vmax, dt, ratio)
+        return
+    if mode[1] == 3:
+        _dead_load(walls, wF, s_to[1], wall_mass, len0, prev, dt, ratio)
         return
     for axis in range(2):
         other = 1 - axis
@@ -391,6 +396,29 @@ def _servo_tied(walls, wF, wK, c_target, len0, prev, thickness, gain, smoothing,
     elif d < -lim:
         d = -lim
     d = smoothing * d + (1.0 - smoothing) * prev[2]
+    dx = k * d
+    prev[0] = dx
+    prev[1] = dx
+    prev[2] = d
+    prev[3] = d
+    walls[0] += dx
+    walls[1] -= dx
+    walls[2] += d
+    walls[3] -= d
+
+
+@njit(**FAST)
+def _dead_load(walls, wF, g_held, m_g, len0, prev, dt, ratio):
+    """One step of the tied walls under a dead load (``walls.dead_load``): the platens'
+    shortening U1 (each y wall inward by U1 / 2, each x wall by k U1 / 2, k = R W0 / H0) with
+    generalized mass m_g [kg] under the held generalized force g_held [N] against the sample's
+    G = F1 + k F2 (the walls' forces of this step), by the disks' leapfrog:
+    U1'(n+1/2) = U1'(n-1/2) + dt (g_held - G) / m_g, U1(n+1) = U1(n) + dt U1'(n+1/2).  ``prev``
+    holds the walls' moves of the last step, so the y walls' prev[2] = U1'(n-1/2) dt / 2: the
+    velocity needs no other memory, and a state saved under this control continues it."""
+    k = ratio * len0[0] / len0[1]
+    g = 0.5 * (wF[2] + wF[3]) + k * 0.5 * (wF[0] + wF[1])
+    d = prev[2] + 0.5 * dt * dt * (g_held - g) / m_g
     dx = k * d
     prev[0] = dx
     prev[1] = dx
@@ -803,7 +831,7 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
             x_ref, walls_ref, disp2, walls, prev, wF, wK,
             mode, s_from, s_to, ramp_start, ramp_len, rate, len0, step0,
             kn, kt, mu, cap_on, beta, kr, mur, damping, dt, thickness, gain, smoothing, vmax,
-            half_skin, nblocks, ratio, lsc, led, F0):
+            half_skin, nblocks, ratio, wall_mass, lsc, led, F0):
     """Run up to nsteps time steps; stop early when the neighbour list must be rebuilt.
 
     Returns the number of steps done.  step0 is the global step counter at entry (the
@@ -811,7 +839,8 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
     ``nblocks``: blocks of disks run concurrently (one per thread; results do not depend on
     it, see ``_block_step``).  One block is the plain serial loop.  Rolling resistance:
     kr = rolling_stiffness * kt [N/m], mur = current rolling friction (0 = off); fnet (N,4).
-    ``ratio``: R of the tied control (mode 2, ``servo_walls``); unused by the other modes.
+    ``ratio``: R of the tied controls (modes 2, 3, ``servo_walls``), ``wall_mass`` the walls'
+    generalized mass under a dead load (mode 3); unused by the other modes.
 
     The energy ledger (``dem.ledger``), off when ``lsc`` is empty: ``lsc`` (L_SIZE,) its scalar
     sums (the L_* slots), ``led`` (6, N) the per-disk sums of ``_block_step``, ``F0`` (N, 3)
@@ -860,9 +889,10 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
         else:
             rt = 1.0
         servo_walls(walls, wF, wK, mode, s_from, s_to, rt, rate, len0, prev, thickness,
-                    gain, smoothing, vmax, dt, ratio)
+                    gain, smoothing, vmax, dt, ratio, wall_mass)
         if ledger:
-            _ledger_walls(lsc, wF, pb, prev, fw, vc, cand_off, cand, v, dt)
+            _ledger_walls(lsc, wF, pb, prev, fw, vc, cand_off, cand, v, dt,
+                          s_to[1] if mode[1] == 3 else math.nan)
             if lsc[L_STARTED] == 0.0:
                 for p in range(n):
                     F0[p, 0] = fnet[p, 0]
@@ -883,14 +913,20 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
 
 
 @njit(**FAST)
-def _ledger_walls(lsc, wF, pb, prev, fw, vc, cand_off, cand, v, dt):
-    """The walls' share of one step of the ledger (``advance``): their work F_w dU_w, and each
+def _ledger_walls(lsc, wF, pb, prev, fw, vc, cand_off, cand, v, dt, g_dead):
+    """The walls' share of one step of the ledger (``advance``): the external work, and each
     wall contact's work f (dU_w - sgn dx_p) (the compression of the contact, sgn = +1 on the
     left and bottom walls, -1 on the others) with dx_p = dt (v(n-1/2) + v(n+1/2)) / 2 along the
-    wall's axis; the dashpot part of its force times the half step's compression."""
+    wall's axis; the dashpot part of its force times the half step's compression.  The external
+    work is the walls' on the sample, F_w dU_w, or under a dead load (``g_dead`` its force,
+    NaN otherwise) the dead load's, G_held dU1 with dU1 = dU_bottom + dU_top: the walls are then
+    part of the system, their kinetic energy with the disks' (``dem.ledger``)."""
+    if not math.isnan(g_dead):
+        lsc[L_W_EXT] += g_dead * 0.5 * (pb[2] + prev[2] + pb[3] + prev[3])
     for wi in range(4):
         du = 0.5 * (pb[wi] + prev[wi])
-        lsc[L_W_EXT] += wF[wi] * du
+        if math.isnan(g_dead):
+            lsc[L_W_EXT] += wF[wi] * du
         lsc[L_DU + wi] += du
         axis = wi // 2
         sgn = 1.0 if wi % 2 == 0 else -1.0

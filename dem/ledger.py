@@ -12,7 +12,9 @@ Split by who exerts the force: sum_p F_p . dx_p = W_ext - W_int, with
 
 * ``w_ext``  = sum_w F_w(n) dU_w(n): the walls' work on the sample (F_w the wall's
   compressive force, dU_w its inward centred displacement, (d(n-1/2) + d(n+1/2)) / 2 with d
-  the servo's move of a step);
+  the servo's move of a step); under a dead load (``walls.dead_load``) the dead load's work
+  G_held dU1, the walls being then part of the system: their kinetic energy 1/2 m_G U1'^2 is
+  in ``ke`` (the same leapfrog identity holds for them);
 * ``w_int``  = sum_c f_c(n) . d delta_c(n): the work stored or spent in the contacts, signed so
   that an elastic contact being loaded gives W_int > 0 (delta the contact's relative
   displacement as compression, its tangential part and, with rolling resistance, the relative
@@ -52,13 +54,16 @@ from typing import NamedTuple
 import numpy as np
 
 from . import kernels
+from .walls import DEAD
 
 # the columns the ledger adds to a history (fixed names: other tools read them)
 COLUMNS = ["ke", "w_ext", "w_int", "w_damp", "e_elastic", "d_slip", "d_roll", "w2_ext", "w2_int",
            "u0", "eq1_residual"]
 # and the ones beside them: the dashpot's dissipation, the rolling moments' and the wall
-# contacts' shares of W_int, the residuals of the first-order balance and of the split of W_int
-EXTRA_COLUMNS = ["d_dash", "w_int_roll", "w_int_wall", "balance_residual", "split_residual"]
+# contacts' shares of W_int, the residuals of the first-order balance and of the split of W_int,
+# E_c - E_c(0) and the time since the start [s]
+EXTRA_COLUMNS = ["d_dash", "w_int_roll", "w_int_wall", "balance_residual", "split_residual",
+                 "dke", "t_ledger"]
 
 
 class LedgerRecord(NamedTuple):
@@ -81,6 +86,8 @@ class LedgerRecord(NamedTuple):
     w_int_wall: float
     balance_residual: float
     split_residual: float
+    dke: float
+    t_ledger: float
 
     def row(self):
         return [getattr(self, c) for c in COLUMNS + EXTRA_COLUMNS]
@@ -96,7 +103,7 @@ class Ledger:
         self.lsc = np.zeros(kernels.L_SIZE)
         self.led = np.zeros((6, n))
         self.F0 = np.zeros((n, 3))
-        self.ke0 = sim.kinetic_energy()
+        self.ke0 = kinetic_energy(sim)
         self.e_el0 = self.elastic_energy()
         self.x0, self.v0 = sim.x.copy(), sim.v.copy()
         self.w0, self.theta0 = sim.w.copy(), sim.theta.copy()
@@ -163,7 +170,7 @@ class Ledger:
     def read(self) -> LedgerRecord:
         s = self.sim
         L, K = self.lsc, kernels
-        ke = s.kinetic_energy()
+        ke = kinetic_energy(s)
         w_ext = float(L[K.L_W_EXT])
         w_roll = -float(np.sum(self.led[5]))
         w_wall = float(L[K.L_W_INT_WALL])
@@ -192,7 +199,18 @@ class Ledger:
             ke, w_ext, w_int, w_damp, e_el, d_slip, d_roll, w2_ext, w2_int, u0,
             rel(dke - (w2_ext - w2_int + w_damp + u0), self._max_eq1), d_dash, w_roll, w_wall,
             rel(dke - (w_ext - w_int + w_damp), self._max_bal),
-            rel(w_int - de_el - d_slip - d_roll - d_dash, self._max_split))
+            rel(w_int - de_el - d_slip - d_roll - d_dash, self._max_split), dke,
+            (s.step - self.step0) * s.dt)
+
+
+def kinetic_energy(sim) -> float:
+    """E_c [J] at the half step: the disks', and under a dead load (``walls.dead_load``) the
+    walls', 1/2 m_G U1'^2 with U1' (n+1/2) = (d_bottom + d_top) / dt, their last moves."""
+    ke = sim.kinetic_energy()
+    c = sim.control
+    if c.mode[1] == DEAD:
+        ke += 0.5 * c.wall_mass * ((sim.prev[2] + sim.prev[3]) / sim.dt) ** 2
+    return ke
 
 
 def max_eq1_residual(history, columns) -> float:
@@ -202,3 +220,42 @@ def max_eq1_residual(history, columns) -> float:
     if h.size == 0:
         return math.nan
     return float(np.max(h[:, list(columns).index("eq1_residual")]))
+
+
+def plot_ledger(path, panels):
+    """One PNG of Eq. 1's terms against the time since the start, one panel per (title, rows,
+    columns) in ``panels`` (a run's history: ``rows`` with ``columns`` names, which must hold
+    the ledger's ``t_ledger``, ``dke``, ``w2_ext``, ``w2_int``, ``w_damp``, ``u0``). Symmetric
+    log axis: the terms span decades. The sum W2_ext - W2_int + W_damp + U0 is drawn dotted on
+    E_c - E_c(0) (Eq. 1: they coincide)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hmodel.io import save_figure
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.4), squeeze=False,
+                             constrained_layout=True)
+    for ax, (title, rows, columns) in zip(axes[0], panels):
+        h = np.asarray(rows, float)
+        col = {c: k for k, c in enumerate(columns)}
+        t = h[:, col["t_ledger"]]
+        dke = h[:, col["dke"]]
+        terms = [(dke, r"$E_c - E_c(0)$", "k", "-", 2.2),
+                 (h[:, col["w2_ext"]], r"$W_2^{ext}$ (walls)", "C0", "-", 1.4),
+                 (-h[:, col["w2_int"]], r"$-W_2^{int}$ (given up by the contacts)", "C3", "-", 1.4),
+                 (h[:, col["w_damp"]], r"$W_{damp}$ (Cundall damping)", "C2", "-", 1.4),
+                 (h[:, col["u0"]], r"$U_0$ (unbalanced at $t = 0$)", "C4", "--", 1.0)]
+        for y, lab, c, ls, lw in terms:
+            ax.plot(t, y, ls, color=c, lw=lw, label=lab)
+        total = h[:, col["w2_ext"]] - h[:, col["w2_int"]] + h[:, col["w_damp"]] + h[:, col["u0"]]
+        ax.plot(t, total, ":", color="y", lw=1.2,
+                label=r"$W_2^{ext} - W_2^{int} + W_{damp} + U_0$ (Eq. 1)")
+        big = max(float(np.max(np.abs(y))) for y, *_ in terms)
+        ax.set_yscale("symlog", linthresh=max(big * 1e-4, 1e-12))
+        ax.axhline(0, color="0.5", lw=0.6)
+        ax.set_xlabel("time since the start [s]")
+        ax.set_ylabel("energy since the start [J]")
+        ax.set_title(title, fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="best")
+    save_figure(fig, path, dpi=120)

@@ -31,7 +31,7 @@ from .ledger import Ledger, max_eq1_residual
 from .settle import HISTORY_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .threads import ThreadChooser
-from .walls import TIED, stress_path
+from .walls import DEAD, TIED, stress_path
 
 
 RELAX_FAIL_STRAIN = 0.01   # a relaxation that moves the walls by 1 % strain has run away
@@ -281,9 +281,10 @@ def state_fingerprint(state: State) -> str:
     if not rolling:
         params = {k: v for k, v in params.items()
                   if k not in ("rolling_friction", "rolling_stiffness")}
-    # the tie's ratio only under the tied control (a control of the other modes hashes as
-    # before the field existed)
-    control = list(state.control) if TIED in state.control.mode else list(state.control)[:7]
+    # the tie's ratio only under the tied controls, the wall mass only under the dead load (a
+    # control of the other modes hashes as before the fields existed)
+    c = list(state.control)
+    control = c if DEAD in state.control.mode else c[:8] if TIED in state.control.mode else c[:7]
     h.update(json.dumps([params, state.step, state.mu] + ([state.mu_r] if rolling else [])
                         + [state.cap_on, control], default=str).encode())
     return h.hexdigest()
@@ -511,12 +512,37 @@ def history_rows(rows):
 
 
 def write_probe_files(rows, out_dir, note=""):
-    """probes.csv, probe_histories.csv and Figs. 15-17 of ``rows`` in ``out_dir``."""
+    """probes.csv, probe_histories.csv, Figs. 15-17 of ``rows`` and fig_ledger.png
+    (``plot_probe_ledger``) in ``out_dir``."""
     from . import io
     io.write_csv(os.path.join(out_dir, "probes.csv"), COLUMNS, csv_rows(rows))
     io.write_csv(os.path.join(out_dir, "probe_histories.csv"), HISTORY_FILE_COLUMNS,
                  history_rows(rows))
     plot_probes(rows, out_dir, note)
+    plot_probe_ledger(rows, os.path.join(out_dir, "fig_ledger.png"), note)
+
+
+def plot_probe_ledger(rows, path, note=""):
+    """Eq. 1's terms against time (``dem.ledger.plot_ledger``) of two probes: the settled one
+    of the smallest W2 (the nearest to the boundary) and the failure of the largest backbone
+    kinetic energy; one panel when only one kind is there, none without a ledger."""
+    from .ledger import plot_ledger
+    k = HISTORY_COLUMNS.index("eq1_residual")
+    led = [r for r in rows if r["history"] and len(r["history"][0]) > k
+           and not math.isnan(r["history"][-1][k])]
+    eq = [r for r in led if r["outcome"] == "equilibrium"]
+    fail = [r for r in led if r["outcome"] == "failure"]
+    panels = []
+    if eq:
+        r = min(eq, key=lambda r: r["w2"])
+        panels.append((f"settled probe {r['alpha_sigma']:g} deg (W2 = {r['w2']:.3f})",
+                       r["history"], HISTORY_COLUMNS))
+    if fail:
+        r = max(fail, key=lambda r: r["ke_peak"])
+        panels.append((f"failed probe {r['alpha_sigma']:g} deg (runaway)", r["history"],
+                       HISTORY_COLUMNS))
+    if panels:
+        plot_ledger(path, [(f"{t}{' - ' + note if note else ''}", h, c) for t, h, c in panels])
 
 
 RMAX = 2.0   # polar radius of the outer ring: 0.5 + W2 is drawn in [0, RMAX]

@@ -3,9 +3,10 @@
 A `Control` says, per axis (0 = x walls = lateral = axis 2, 1 = y walls = axial = axis 1),
 whether the walls are stress controlled (servo, YADE TriaxialStressController-like) or
 strain-rate controlled, or, both axes together, tied (``tied``: the proportional strain path
-d eps2 = R d eps1 with the stress conjugate to it, c = s1 + R s2, held by the servo).  Stresses
-are compression positive [Pa], strain rates compression positive [1/s].  The servo itself is
-`kernels.servo_walls`.
+d eps2 = R d eps1 with the stress conjugate to it, c = s1 + R s2, held by the servo), or tied
+under a dead load (``dead_load``: the walls one dynamic degree of freedom under a constant
+generalized force, no servo).  Stresses are compression positive [Pa], strain rates compression
+positive [1/s].  The servo itself is `kernels.servo_walls`.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-STRESS, STRAIN, TIED = 0, 1, 2
+STRESS, STRAIN, TIED, DEAD = 0, 1, 2, 3
 
 
 class Control(NamedTuple):
@@ -25,12 +26,14 @@ class Control(NamedTuple):
     ramp_len: int = 0                     # ramp length in steps (0 = step change)
     rate: tuple = (0.0, 0.0)              # strain rate per axis [1/s], compression > 0
     len0: tuple = (1.0, 1.0)              # reference lengths (W0, H0) for the strain rate [m]
-    ratio: float = 0.0                    # R of the tie d eps2 = R d eps1 (TIED only)
+    ratio: float = 0.0                    # R of the tie d eps2 = R d eps1 (TIED, DEAD)
+    wall_mass: float = 0.0                # m_G of the tied walls under a dead load [kg] (DEAD)
 
     def arrays(self):
         return (np.asarray(self.mode, np.int64), np.asarray(self.s_from, float),
                 np.asarray(self.s_to, float), int(self.ramp_start), int(self.ramp_len),
-                np.asarray(self.rate, float), np.asarray(self.len0, float), float(self.ratio))
+                np.asarray(self.rate, float), np.asarray(self.len0, float), float(self.ratio),
+                float(self.wall_mass))
 
 
 def isotropic(stress, ramp_from=None, step=0, ramp_len=0) -> Control:
@@ -67,6 +70,31 @@ def tied(ratio, c_from, c_to, step, ramp_len, len0) -> Control:
         raise ValueError(f"ratio={ratio!r}; allowed range: ratio < 0 (finite)")
     return Control((TIED, TIED), (0.0, float(c_from)), (0.0, float(c_to)), int(step),
                    int(ramp_len), (0.0, 0.0), tuple(len0), float(ratio))
+
+
+def dead_load(ratio, g_held, wall_mass, len0) -> Control:
+    """The proportional strain path d eps2 = R d eps1 (``ratio`` = R < 0) under a dead load: the
+    walls, tied (each y wall moves inward by U1 / 2, each x wall by k U1 / 2, k = R W0 / H0 with
+    (W0, H0) = ``len0``), are one degree of freedom, the platens' shortening U1, with the
+    generalized mass ``wall_mass`` m_G [kg] (their kinetic energy is 1/2 m_G U1'^2), driven by
+    the constant generalized force ``g_held`` [N] against the sample's, G = F1 + k F2 (F1, F2 the
+    mean compressive forces on the y and on the x walls: F1 dU1 + F2 dU2 = G dU1 exactly):
+    m_G U1'' = G_held - G, integrated by the disks' leapfrog (``kernels._dead_load``).  No
+    servo, no speed limit, no damping on the walls.  The held force is stored as the y axis's
+    target."""
+    if not (math.isfinite(ratio) and ratio < 0):
+        raise ValueError(f"ratio={ratio!r}; allowed range: ratio < 0 (finite)")
+    if not (math.isfinite(wall_mass) and wall_mass > 0):
+        raise ValueError(f"wall_mass={wall_mass!r}; allowed range: wall_mass > 0 [kg] (finite)")
+    return Control((DEAD, DEAD), (0.0, float(g_held)), (0.0, float(g_held)), 0, 0, (0.0, 0.0),
+                   tuple(len0), float(ratio), float(wall_mass))
+
+
+def generalized_force(wF, ratio, len0):
+    """G = F1 + k F2 [N] of the walls' forces ``wF`` (4,) [N] (k = R W0 / H0): the generalized
+    force conjugate to the platens' shortening U1 under the tie (``dead_load``)."""
+    k = ratio * len0[0] / len0[1]
+    return 0.5 * (wF[2] + wF[3]) + k * 0.5 * (wF[0] + wF[1])
 
 
 def wall_stress(wF, walls, thickness):

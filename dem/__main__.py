@@ -552,8 +552,11 @@ def main(argv=None):
         if a.cmd == "burst":
             from .burst import load_starts
             _burst_options(a)         # bad options and input files before the compilation
-            _, _, own = load_starts(a.biaxial, a.start_fractions, a.params)
+            starts, _, own = load_starts(a.biaxial, a.start_fractions, a.params)
             a.burst_options = _burst_options(a, own.n)
+            if a.resume:              # a folder of other states is refused before the kernels
+                from .burst import checkpoint_header, read_checkpoint
+                read_checkpoint(a.out, checkpoint_header(starts, a.ratios, a.burst_options))
         elif getattr(a, "biaxial", None):
             from .domain import load_states
             load_states(a.biaxial, [s for s in (getattr(a, "states", None) or "").split(",") if s])

@@ -621,6 +621,36 @@ def _hold_task(args):
     return hold(state, ratio, c_target, opts, threads, progress)
 
 
+def checkpoint_header(starts, ratios, opts) -> dict:
+    """What a burst run is, for its checkpoint: the start states' fingerprints, the ratios and
+    the options (``starts`` as ``load_starts`` gives them)."""
+    from .probes import state_fingerprint
+    return json.loads(json.dumps({"fingerprints": {f"{f:g}": state_fingerprint(st)
+                                                   for f, st, _ in starts},
+                                  "ratios": [float(r) for r in ratios],
+                                  "options": opts._asdict()}))
+
+
+def read_checkpoint(out_dir, header) -> list:
+    """The finished runs of ``out_dir``/burst_runs.jsonl (none if there is no such file; a torn
+    last line dropped). ValueError (``--resume``, one line) if it belongs to other start states,
+    ratios or options."""
+    path = os.path.join(out_dir, "burst_runs.jsonl")
+    if not os.path.exists(path):
+        return []
+    recs = []
+    with open(path) as f:
+        for line in f.read().split("\n"):
+            try:
+                recs.append(json.loads(line))
+            except ValueError:
+                continue
+    if not recs or recs[0] != header:
+        raise ValueError(f"--resume: {path} belongs to other start states, ratios or options; "
+                         "remove it or choose another output folder")
+    return recs[1:]
+
+
 class _Checkpoint:
     """``out_dir``/burst_runs.jsonl: a header (the start states' fingerprints, the ratios, the
     options), then one line per finished run (a path, a relaxation, a hold), each written and
@@ -632,21 +662,8 @@ class _Checkpoint:
         from .io import atomic_write_bytes
         self.dir = os.path.join(out_dir, "rest")
         self.path = os.path.join(out_dir, "burst_runs.jsonl")
-        self.records = []
-        if resume and os.path.exists(self.path):
-            with open(self.path) as f:
-                lines = f.read().split("\n")
-            recs = []
-            for line in lines:
-                try:
-                    recs.append(json.loads(line))
-                except ValueError:
-                    continue
-            if not recs or recs[0] != json.loads(json.dumps(header)):
-                raise ValueError(f"--resume: {self.path} belongs to other start states, ratios or "
-                                 "options; remove it or choose another output folder")
-            self.records = recs[1:]
-        elif os.path.exists(self.path):
+        self.records = read_checkpoint(out_dir, header) if resume else []
+        if not resume and os.path.exists(self.path):
             os.replace(self.path, self.path[:-len(".jsonl")] + ".previous.jsonl")
         atomic_write_bytes(self.path, ("\n".join(json.dumps(r) for r in [header] + self.records)
                                        + "\n").encode())
@@ -677,10 +694,13 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     history.csv, paths.csv, rest.csv, summary.json, params.json, the relaxed switch states
     (rest/) and the figures. Returns (burst rows as dicts, summary dict)."""
     from . import io
-    from .probes import _map, state_fingerprint
+    from .probes import _map
     ratios = [check_ratio(float(r)) for r in ratios]
     starts, eta_peak, params = load_starts(biaxial_dir, fractions, params_file)
     opts.validate(params.n)
+    header = checkpoint_header(starts, ratios, opts)
+    if resume:
+        read_checkpoint(out_dir, header)      # refused before anything is written
     t0 = time.time()
     os.makedirs(out_dir, exist_ok=True)
     # the parameters the run used, in the shared file format (``--params DIR/params.json``)
@@ -688,8 +708,6 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     record_params(out_dir, params, f"python -m dem burst; parameters: the start states' own "
                                    f"(--biaxial {biaxial_dir})")
     combos = [(r, f, st) for r in ratios for f, st, _ in starts]
-    header = {"fingerprints": {f"{f:g}": state_fingerprint(st) for f, st, _ in starts},
-              "ratios": ratios, "options": opts._asdict()}
     ck = _Checkpoint(out_dir, header, resume)
     # a run in a pool of processes runs on one thread; alone in this process, on ``threads``
     # (None: dem.threads chooses)

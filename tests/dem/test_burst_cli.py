@@ -74,9 +74,48 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     from dem.params import DemParams, load_params
     assert load_params(out / "params.json") == DemParams.from_dict(s["params"])
     assert load_params(out / "params.json") == load_params(biaxial_300 / "params.json")
-    for fig in ("fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png"):
+    for fig in ("fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png",
+                "fig_burst_ledger.png"):
         assert (out / fig).stat().st_size > 10_000
     assert "burst: " in capsys.readouterr().out
+    # from rest: every switch's state relaxed at fixed strain (rest.csv: c at rest below the
+    # loaded c), held by a dead load, its kinetic energy at the switch the rest floor, Eq. 1
+    # closed in every hold
+    _, rest = io.read_csv(out / "rest.csv")
+    assert len(rest) >= 3 and all(x["outcome"] == "equilibrium" for x in rest)
+    for r in runs:
+        assert r["hold"] == "dead_load" and r["wall_mass"] > 0
+        assert r["c_rest"] == r["c_switch"] and r["relax_outcome"] == "equilibrium"
+        assert r["ke_switch"] <= s["options"]["ke_tol"] * 300
+        assert r["eq1_residual"] <= 1e-8
+        assert any(x["c_rest"] == r["c_rest"] and x["c_loaded"] == r["c_loaded"] for x in rest)
+    # only the relaxed states of the switches are kept
+    assert sorted(p.name.split("_")[-1][:7] for p in (out / "rest").iterdir()) == \
+        ["relaxed"] * len(runs)
+    return out
+
+
+def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, tmp_path,
+                                                                     capsys):
+    # a run interrupted after its path and relaxations resumes with them (the log says so and
+    # runs only the holds), to the same burst.csv; a folder of other options is refused with
+    # one line before anything is computed
+    from dem.__main__ import main
+    out = tmp_path / "burst"
+    args = ["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
+            "--threads", "1", "--path-strain", "0.004", "--max-steps", "30000"]
+    main(args)
+    full = (out / "burst.csv").read_bytes()
+    lines = (out / "burst_runs.jsonl").read_text().splitlines()
+    keep = [x for x in lines if '"kind": "hold"' not in x]
+    (out / "burst_runs.jsonl").write_text("\n".join(keep) + "\n{\"kind\": \"ho")  # torn line
+    capsys.readouterr()
+    main(args + ["--resume"])
+    err = capsys.readouterr().err
+    assert "resumed from" in err and "0 holds finished" in err and "grid state" not in err
+    assert (out / "burst.csv").read_bytes() == full
+    code, err = _run(args + ["--resume", "--dc", "200"], capsys)
+    assert code == 2 and len(err) == 1 and "--resume" in err[0], err
 
 
 @pytest.mark.parametrize("args,option,words", [
@@ -87,6 +126,13 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     (["--dc", "-1"], "--dc", ">= 0"),
     (["--start-fractions", "0.5"], "--start-fractions", "not saved"),
     (["--below-rise", "1"], "--below-rise", "< 1"),
+    (["--below-rise", "0"], "--below-rise", "0 <"),
+    (["--wall-mass", "0"], "--wall-mass", "> 0"),
+    (["--wall-mass", "-5"], "--wall-mass", "> 0"),
+    (["--wall-mass", "nan"], "--wall-mass", "finite"),
+    (["--wall-mass", "inf"], "--wall-mass", "finite"),
+    (["--relax-max-steps", "1000"], "--relax-max-steps", "two equilibrium windows"),
+    (["--hold", "spring"], "--hold", "dead_load"),
     (["--workers", "0"], "--workers", "1 <= value"),
 ])
 def test_bad_input_is_one_line_exit_2_nothing_written(biaxial_300, tmp_path, capsys, args,

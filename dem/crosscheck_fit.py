@@ -1,7 +1,7 @@
 """The H-model fitted to the project's 12,000-disk DEM curve, its directional analysis and
 bifurcation domain beside the DEM's, as fractions of each peak and in eta (issue 19, part 2).
 
-    python -m hmodel.fit_dem [--dem docs/gallery/full] [--out docs/gallery/fit_dem12000]
+    python -m dem.crosscheck_fit [--dem docs/gallery/full] [--out docs/gallery/fit_dem12000]
 
 runs, in order: ``python -m hmodel fit`` on DEM/biaxial.csv (OUT/params.json, fig_fit.png, ...);
 ``python -m hmodel probes`` with the fitted parameters at the fraction of the fitted model's peak
@@ -14,7 +14,8 @@ comparison.json, fig_comparison.png, fig_domain_pq.png and comparison.md (docs/f
 Second-order work on both sides: the DEM's is ds.de / (|ds| |de|) of stress probes (Eulerian,
 dem/probes.py); the H-model's is given both as its Lagrangian W2 = dPi:de / (|dPi| |de|) (the
 paper's, spec/hmodel.md) and as ds.de / (|ds| |de|), the DEM's definition. This module reads the
-DEM's files; of ``dem`` it imports only the wording of the DEM's strength (dem.domain.eta_lim_text).
+DEM's files. A cross-check job (beside ``dem.crosscheck`` and ``dem.crosscheck_burst``, the
+places of ``dem`` that import ``hmodel``), so that ``hmodel`` imports nothing of ``dem``.
 """
 from __future__ import annotations
 
@@ -27,12 +28,12 @@ import time
 
 import numpy as np
 
-from . import cli, options as opt
-from .fit import _jsonable
-from .experiment import biaxial_test, domain_point, state_at_eta
-from .io import atomic_open, read_csv, save_figure, write_csv
-from .params import HParams, load_params
-from .probes import arcs, directional_sweep, format_arcs, stress_probes
+from hmodel import cli, options as opt
+from hmodel.experiment import biaxial_test, domain_point, state_at_eta
+from hmodel.fit import _jsonable
+from hmodel.io import atomic_open, read_csv, save_figure, write_csv
+from hmodel.params import HParams, load_params
+from hmodel.probes import arcs, directional_sweep, format_arcs, stress_probes
 
 __all__ = ["read_dem_domain", "param_argv", "eulerian_w2", "hmodel_state", "compare", "main"]
 
@@ -263,7 +264,7 @@ def _direction_figures(c: dict, out: str) -> list:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import fig_polar_w2
+    from hmodel.plots import fig_polar_w2
     st, d = c["states"], c["dem"]
     fig, axes = plt.subplots(1, len(st), figsize=(3.6 * len(st), 3.8), sharey=True, constrained_layout=True)
     axes = np.atleast_1d(axes)
@@ -380,7 +381,7 @@ def _bracket(x, lo, hi):
 def _eta_lim_text(d):
     """The DEM's strength under stress control in the DEM's own words (dem.domain, imported
     here only: the rest of this module reads the DEM's files)."""
-    from dem.domain import eta_lim_text
+    from .domain import eta_lim_text
     return eta_lim_text(d["boundaries"])
 
 
@@ -482,7 +483,7 @@ def _dem_dip(st):
 
 
 def main(argv=None) -> int:
-    ap = opt.Parser(prog="python -m hmodel.fit_dem",
+    ap = opt.Parser(prog="python -m dem.crosscheck_fit",
                     description="fit the H-model to the DEM's drained curve and compare the bifurcation domains")
     ap.add_argument("--dem", default="docs/gallery/full",
                     help="folder of the DEM run: biaxial.csv and domain12000/{domain.csv,boundaries.json}")
@@ -553,7 +554,7 @@ def main(argv=None) -> int:
         c["wall_time_s"] = time.time() - t0
         with atomic_open(os.path.join(args.out, "comparison.json")) as f:
             json.dump(_jsonable({k_: v for k_, v in c.items() if k_ != "curves"}), f, indent=2)
-        argv_text = "python -m hmodel.fit_dem" + "".join(
+        argv_text = "python -m dem.crosscheck_fit" + "".join(
             f" --{k_.replace('_', '-')} {v}" for k_, v in vars(args).items()
             if v != ap.get_default(k_))
         with atomic_open(os.path.join(args.out, "comparison.md")) as f:

@@ -195,7 +195,8 @@ def _burst_options(a, n_disks=None):
                             strain_tol=a.strain_tol, ke_tol=a.ke_tol, window=a.window,
                             max_steps=a.max_steps, fail_strain=a.fail_strain, hold=a.hold,
                             wall_mass=a.wall_mass, wall_period_steps=a.wall_period_steps,
-                            relax_max_steps=a.relax_max_steps).validate(n_disks)
+                            relax_max_steps=a.relax_max_steps, stairs=a.stairs,
+                            max_holds=a.max_holds).validate(n_disks)
     except ValueError as e:       # name the option as the command line spells it
         msg = str(e)
         name = msg.split("=", 1)[0]
@@ -401,8 +402,13 @@ def build_parser() -> opt.Parser:
     u.add_argument("--relax-max-steps", type=opt.integer(1), default=1_000_000,
                    help="cap of a relaxation at fixed strain [steps] (at least two equilibrium "
                         "windows)")
+    u.add_argument("--stairs", type=opt.integer(1), default=8,
+                   help="the staircase's first step of c: (loaded peak - c at rest) / this")
+    u.add_argument("--max-holds", type=opt.integer(2), default=40,
+                   help="cap of the staircase's holds (the search then ends without a past run)")
     u.add_argument("--resume", action="store_true",
-                   help="keep the paths, relaxations and holds already in DIR/burst_runs.jsonl")
+                   help="keep the paths, relaxations and holds already in DIR (burst_runs.jsonl, "
+                        "rest/)")
     u.add_argument("--scheduler", default=None,
                    help="dask.distributed scheduler address: the runs go to its workers")
     u.add_argument("--max-steps", type=opt.integer(1), default=1_000_000,

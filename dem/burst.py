@@ -1,33 +1,43 @@
-"""Failure made to happen in the DEM: the proportional strain path, its conjugate stress held
-past its peak, and the burst of kinetic energy (paper Eq. 1; ``docs/burst.md``, ``docs/dem.md``).
+"""Failure made to happen in the DEM, from rest under a dead load: the proportional strain path,
+its conjugate stress held past its peak at rest, and the burst of kinetic energy (paper Eq. 1;
+``docs/burst.md``, ``docs/dem.md``).
 
 From a state of the drained biaxial path (``dem biaxial --save-fractions``), the walls impose the
 proportional strain path d eps2 = R d eps1 (R < 0: lateral extension) at the axial strain rate of
 the biaxial test (``walls.strain_rate``, both axes strain controlled; engineering strains on the
 biaxial test's reference lengths) while the stress conjugate to it, c = s1 + R s2 (wall stresses,
 compression positive), is recorded: along the path W2 = d eps1 dc, so W2 = 0 where c peaks.
-Then the control switches to c (``walls.tied``: the y walls move to hold c, the x walls follow
-them so that d eps2 = R d eps1 still holds at every step; ``kernels._servo_tied``), held at
-c_switch + dc, and ``dem.settle`` decides the run with the stress error |c - c_target|.
 
-* **The peak** (``proportional_path``): the largest c recorded, confirmed once the path has gone
-  ``peak_strain`` (0.5 %) of axial strain beyond it without a larger one, or c has fallen from it
-  by ``peak_drop`` (150 kPa): the DEM's c is noisy, with stick-slip falls of up to 62 kPa that
-  it recovers within a few tenths of a percent (the measurements behind the amounts are in
-  ``docs/dem.md``). A path that unloads (its mean wall stress below ``UNLOADED`` of its start:
-  the walls have left the grains, as along R = -2.5) ends without a peak and without runs.
-* **The switches**: ``below`` at the first state of the path with c >= c_start + ``below_rise``
-  (c_peak - c_start), ``past`` at the peak state; both held at their own c + dc. A path whose c
-  does not peak within ``path_strain`` gets one ``below`` run, switched at its end.
-  ``below_rise`` is 0.5 here, not the 0.95 of ``docs/burst.md``: under strain control at
-  0.01/s the DEM's c stands above what the sample holds under c control (rate overstress and
-  stick-slip: 2000 disks, R = -2 from 0.90, path peak 75.9 kPa; holds at 0.95 and 0.75 of the
-  rise fail, c never above 74.4 and 73.1 kPa; the hold at 0.5, 70.8 kPa, settles).
+* **The loaded peak** (``proportional_path``): the largest c recorded, confirmed once the path
+  has gone ``peak_strain`` (0.5 %) of axial strain beyond it without a larger one, or c has
+  fallen from it by ``peak_drop`` (150 kPa): the DEM's c is noisy, with stick-slip falls of up to
+  62 kPa that it recovers within a few tenths of a percent (``docs/dem.md``). A path that
+  unloads (its mean wall stress below ``UNLOADED`` of its start: the walls have left the grains,
+  as along R = -2.5) ends without a peak and without runs. Under strain control at the test's
+  rate this peak carries the loading's rate overstress: it is an upper bound of what the
+  sample holds at rest.
+* **The peak at rest** (``staircase``): the path's start state relaxed at fixed strain
+  (``relax``: the walls still, until dem.settle's equilibrium and a c that no longer drifts),
+  then G held by steps under a dead load, each hold from the previous equilibrium (so from
+  rest): a step that settles moves the staircase up, one that fails is halved, down to ``dc``;
+  the c peak at rest is the last c held, and the failing hold of +dc from it is the ``past``
+  run. ``below``: from the first equilibrium of the staircase whose c reaches c_rest(start) +
+  ``below_rise`` (c_peak_rest - c_rest(start)), held at its c + dc. The loaded peak's state is
+  relaxed too (rest.csv: its c at rest and the drop from the loaded c). Relaxing the path's
+  states at fixed strain and holding the largest of their c + dc was tried first: at 2000 disks
+  that hold settled (docs/dem.md: a state relaxed at fixed strain keeps less c than the sample
+  can hold).
+* **The dead load** (``walls.dead_load``): the walls, tied, are one dynamic degree of freedom,
+  the platens' shortening U1, of generalized mass m_G (``wall_mass_rule``: their period on their
+  contact stiffness is ``wall_period_steps`` steps), under the constant generalized force
+  G_held = G(switch) + W t dc: m_G U1'' = G_held - G, no servo, no speed limit, no damping on
+  the walls; W2_ext = dG dU1 exactly. ``hold="servo"`` keeps the servo on c instead.
 * **The runs** (``hold``) end by ``dem.settle``'s rule: equilibrium over a window (unbalanced
-  force, |c - c_target| <= stress_tol, strain drift, backbone kinetic energy); failure when the
-  strain since the switch passes ``fail_strain`` or runs away (``runaway_ratio`` times the
-  elastic strain of ``strain_norm``) with the servo unable to hold c and the kinetic energy not
-  decaying; undecided at the cap.
+  force, the stress error |G - G_held| / (W t) (servo: |c - c_target|) <= stress_tol, strain
+  drift, backbone kinetic energy); failure when the strain since the switch passes
+  ``fail_strain`` or runs away (``runaway_ratio`` times the elastic strain of ``strain_norm``)
+  with the stress error above ``runaway_stress`` and the kinetic energy not decaying; undecided
+  at the cap.
 
 Every check records (history.csv): total and backbone kinetic energy [J], unbalanced ratio,
 strains, wall stresses, c, c_target, |c - c_target|, ``w2_ext_held`` = dG dU1 (dG = W_s t dc,
@@ -61,7 +71,6 @@ from .walls import strain_rate, tied
 
 SWITCHES = ("below", "past")
 HOLDS = ("dead_load", "servo")
-REST_MARGIN = 5e-4     # strain beyond the loaded c peak where the rest peak is looked for
 UNLOADED = 0.05        # a path whose mean wall stress falls below this of its start has unloaded
 
 # a path's records, then its energy ledger from the path's start (first order: the second-order
@@ -83,7 +92,7 @@ BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction
                  "unbalanced_end", "path_steps", "n_disks", "w2_ext_held_end",
                  "w2_int_secant_end", "w_damp_end", "u0_end", "eq1_residual", "ke_switch",
                  "c_rest", "c_loaded", "hold", "c_peak_loaded", "eta_peak_loaded", "wall_mass",
-                 "g_held", "relaxations", "relax_outcome"]
+                 "g_held", "holds", "rest_search"]
 
 
 class BurstOptions(NamedTuple):
@@ -110,8 +119,8 @@ class BurstOptions(NamedTuple):
     wall_mass: float | None = None  # m_G of the walls under the dead load [kg]; None: the rule
     wall_period_steps: float = 200.0  # the rule: the walls' period on their contacts, in steps
     relax_max_steps: int = 1_000_000  # cap of a relaxation at fixed strain [steps]
-    rest_every: int = 10            # the path keeps a state every this many records (rest grid)
-    rest_coarse: int = 8            # states relaxed in the first round of the rest search
+    stairs: int = 8                 # the staircase's first step: (loaded peak - c at rest) / this
+    max_holds: int = 40             # cap of the staircase's holds
 
     def validate(self, n_disks=None) -> "BurstOptions":
         """ValueError naming the option and its range for a bad value; ``n_disks``: the
@@ -128,8 +137,8 @@ class BurstOptions(NamedTuple):
                   ("strain_norm", self.strain_norm > 0, "strain_norm > 0 [Pa]"),
                   ("wall_period_steps", self.wall_period_steps >= 20,
                    "wall_period_steps >= 20 (the leapfrog resolves the walls' period)"),
-                  ("rest_every", self.rest_every >= 1, "rest_every >= 1"),
-                  ("rest_coarse", self.rest_coarse >= 3, "rest_coarse >= 3"))
+                  ("stairs", self.stairs >= 1, "stairs >= 1"),
+                  ("max_holds", self.max_holds >= 2, "max_holds >= 2"))
         for name, ok, rng in checks:
             val = getattr(self, name)
             if not ok or not math.isfinite(val):
@@ -196,7 +205,7 @@ class PathResult(NamedTuple):
     rows: np.ndarray          # (records, len(PATH_COLUMNS) - 2): PATH_COLUMNS from "step"
     peak: int | None          # row of the loaded c peak (None: no peak within the path)
     confirmed_by: str         # "drop", "strain", "" (no peak) or "unloaded"
-    grid: list                # [(row, State)]: the start and every opts.rest_every-th record
+    grid: list                # [(row, State)]: the start, then the loaded peak's (or the end's)
     steps: int                # time steps of the path
     wall_time: float          # [s]
 
@@ -218,8 +227,8 @@ def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOpti
     """The proportional strain path d eps2 = R d eps1 from ``state`` at ``opts.rate`` (both
     axes strain controlled), recorded every ``opts.record_strain``, until the loaded c peak is
     confirmed, the path has gone ``opts.path_strain`` or it has unloaded (see the module doc).
-    Keeps the states of the rest search's grid: the start and every ``opts.rest_every``-th
-    record, up to the path's end (the loaded peak + ``peak_strain``)."""
+    Keeps the start state and the loaded peak's (or, without a peak, the end's): the rest
+    search starts from the first (``staircase``) and measures the overstress of the second."""
     t0 = time.time()
     sim = Simulation(state)
     if threads is not None:
@@ -230,17 +239,15 @@ def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOpti
     rows = [_record(sim, ratio)]
     e_start, p_start = rows[0][1], rows[0][5]
     grid = [(0, sim.state())]
-    peak, how = 0, ""
+    peak, how, peak_state = 0, "", None
     while True:
         sim.run(every)
         rows.append(_record(sim, ratio))
         k = len(rows) - 1
         e1, c, p = rows[k][1], rows[k][8], rows[k][5]
-        if k % opts.rest_every == 0:
-            grid.append((k, sim.state()))
         how = confirm_peak(c, e1, rows[peak][8], rows[peak][1], opts)
         if how == "new":
-            peak, how = k, ""
+            peak, how, peak_state = k, "", sim.state()
         if not how and p < UNLOADED * p_start:
             how = "unloaded"
         if progress:
@@ -250,11 +257,7 @@ def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOpti
     rows = np.asarray(rows, float)
     if how == "unloaded":
         return PathResult(rows, None, how, [], sim.step - state.step, time.time() - t0)
-    if how:          # the rest search looks up to the loaded peak + REST_MARGIN of strain
-        lim = rows[peak, 1] + REST_MARGIN
-        grid = [(k, st) for k, st in grid if rows[k, 1] <= lim] or grid[:1]
-    else:            # no peak: one below run from the path's end
-        grid = [grid[0], (len(rows) - 1, sim.state())]
+    grid.append((peak, peak_state) if how and peak > 0 else (len(rows) - 1, sim.state()))
     return PathResult(rows, peak if how else None, how, grid, sim.step - state.step,
                       time.time() - t0)
 
@@ -262,8 +265,11 @@ def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOpti
 # ----------------------------------------------------------------------------------------------
 # From rest: a state relaxed at fixed strain, and the c peak at rest along the path
 # ----------------------------------------------------------------------------------------------
-REST_COLUMNS = ["ratio", "start_fraction", "grid", "row", "eps1", "c_loaded", "c_rest",
+REST_COLUMNS = ["ratio", "start_fraction", "state", "eps1", "c_loaded", "c_rest", "drop",
                 "eta_rest", "outcome", "steps", "ke_end", "unbalanced_end"]
+STAIR_COLUMNS = ["ratio", "start_fraction", "hold", "role", "c_from", "c_target", "dc",
+                 "outcome", "steps", "eps1_start", "eps1_end", "c_end", "ke_switch",
+                 "ke_backbone_max", "w2_int_end", "eq1_residual"]
 
 
 class RelaxResult(NamedTuple):
@@ -314,81 +320,186 @@ def relax(state: State, ratio: float, opts: BurstOptions = BurstOptions(), threa
                        res.history, time.time() - t0)
 
 
-class RestSearch:
-    """The c peak at rest along a path (``PathResult.grid``), found by relaxing grid states:
-    the start, ``opts.rest_coarse`` states evenly spread from it to the loaded peak +
-    REST_MARGIN of strain (the rest peak does not lie beyond the loaded one by more than the
-    overstress's strain: measured in docs/dem.md), then halving the grid interval around the
-    largest relaxed c until the neighbours are relaxed; the ``below`` switch is the first grid
-    state whose relaxed c reaches c_rest(start) + below_rise (c_rest_peak - c_rest(start)),
-    found by halving between the relaxed states that bracket it. ``todo()`` says which grid
-    states to relax next (each round's in one pool), ``add()`` takes their results; ``done``
-    once both switches are known. A path without a loaded peak gets one ``below`` run from its
-    last grid state."""
+class StairResult(NamedTuple):
+    """The rest search of one path (``staircase``)."""
+    relaxed: dict             # "start" and "peak" (the loaded peak's or the end's) -> RelaxResult
+    holds: list               # [(role, c_from, c_target, HoldResult)]: the staircase's, then
+                              # the below run ("below"); the past run is the last failing one
+    c_peak: float             # the largest c at rest held at equilibrium (nan: none)
+    eps1_peak: float          # its axial strain
+    eta_peak: float
+    switches: dict            # "below"/"past" -> index into holds
+    end: str                  # how the search ended: "past found", "no loaded peak", ...
+    wall_time: float
 
-    def __init__(self, path: PathResult, opts: BurstOptions):
-        self.path = path
-        self.opts = opts
-        self.relaxed = {}                         # grid index -> RelaxResult
-        self.end = len(path.grid) - 1             # the path keeps the grid it needs
-        if path.peak is None:
-            self._round = [0, self.end]
-        else:
-            n = min(self.opts.rest_coarse, self.end + 1)
-            self._round = sorted(set(int(round(v)) for v in np.linspace(0, self.end, n)))
-        self.peak = None          # grid index of the rest peak
-        self.below = None         # grid index of the below switch
-        self.confirmed = path.peak is not None
 
-    def c(self, i):
-        return self.relaxed[i].c_rest
+def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(), threads=None,
+              log=None, journal=None) -> StairResult:
+    """The c peak at rest along the path, found from rest as the theory asks it: the path's start
+    state relaxed at fixed strain (``relax``), then G held by steps (``hold``, from the last
+    equilibrium each time, so every hold starts from rest): the first step is (c_peak_loaded -
+    c_rest) / ``opts.stairs``; a step that settles moves the staircase up (its end state, at
+    rest, is the next start); one that fails is halved, down to ``opts.dc``; the search ends with
+    a failing hold of +dc from an equilibrium at c: the c peak at rest is that c, the ``past``
+    run that failing hold. ``below``: from the first equilibrium of the staircase whose c reaches
+    c_rest + below_rise (c_peak_rest - c_rest), held at its c + dc. The loaded peak's state is
+    relaxed too: its c at rest and its drop from the loaded c are recorded. A path without a
+    loaded peak gets one below run from its end, relaxed. ``journal``: a ``_Journal`` that
+    records every relaxation and hold as it finishes (and gives them back on a resume)."""
+    from . import io
+    t0 = time.time()
+    log = log or (lambda m: None)
+    journal = journal or _Journal(None)
+    dc = opts.dc
+    relaxed = {}
+    for name, (row, st) in zip(("start", "peak"), path.grid):
+        res = journal.relaxation(name)
+        if res is None:
+            res = relax(st, ratio, opts, threads)
+            journal.add_relaxation(name, res, path.rows[row, 8])
+            log(f"{name} state relaxed at fixed strain: c {res.c_loaded / 1e3:.2f} -> "
+                f"{res.c_rest / 1e3:.2f} kPa, {res.outcome} after {res.steps} steps")
+        relaxed[name] = res
+    holds = []
+    eq = [("start", relaxed["start"].c_rest, path.rows[path.grid[0][0], 1])]   # equilibria
 
-    def todo(self):
-        return [i for i in self._round if i not in self.relaxed]
+    def held(role, key, c_from, target):
+        got = journal.hold(len(holds))
+        if got is None:
+            got = hold(journal.state(key), ratio, target, opts, threads)
+            journal.add_hold(len(holds), role, c_from, target, got)
+            log(f"{role} hold {len(holds)}: c {c_from / 1e3:.3f} -> {target / 1e3:.3f} kPa: "
+                f"{got.outcome} after {got.steps} steps")
+        holds.append((role, c_from, target, got))
+        return got
 
-    def add(self, results: dict):
-        self.relaxed.update(results)
-        if self.todo():
+    journal.keep("start", relaxed["start"].state)
+    if path.peak is None:                           # no loaded peak: below from the path's end
+        journal.keep("end", relaxed["peak"].state)
+        held("below", "end", relaxed["peak"].c_rest, relaxed["peak"].c_rest + dc)
+        return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds,
+                           math.nan, math.nan, math.nan, {"below": 0}, "no loaded peak",
+                           time.time() - t0)
+    c_s = relaxed["start"].c_rest
+    key = "start"
+    step = max((path.rows[path.peak, 8] - c_s) / opts.stairs, dc)
+    end = ""
+    while len(holds) < opts.max_holds:
+        h = held("stair", key, c_s, c_s + step)
+        if h.outcome == "equilibrium":
+            key = f"eq{len(holds) - 1}"
+            journal.keep(key, h.end_state)
+            c_s = h.history[-1, 4]
+            eq.append((key, c_s, h.history[-1, 2]))
+            continue
+        if h.outcome == "undecided":
+            end = "a hold undecided at --max-steps"
+            break
+        if step <= dc:
+            end = "past found"
+            break
+        step = max(0.5 * step, dc)
+    else:
+        end = f"no failure within {opts.max_holds} holds"
+    switches = {}
+    c_peak, e_peak = eq[-1][1], eq[-1][2]
+    eta_peak = math.nan
+    if end == "past found":
+        switches["past"] = len(holds) - 1
+        thr = eq[0][1] + opts.below_rise * (c_peak - eq[0][1])
+        kb, cb, _ = next(x for x in eq if x[1] >= thr) if len(eq) > 1 else eq[0]
+        held("below", kb, cb, cb + dc)
+        switches["below"] = len(holds) - 1
+        hp = holds[switches["past"]][3].history
+        eta_peak = (hp[0, 10] - hp[0, 11]) / (0.5 * (hp[0, 10] + hp[0, 11]))
+    log(f"rest search: {end}; c peak at rest {c_peak / 1e3:.3f} kPa, {len(holds)} holds")
+    return StairResult({k: v._replace(state=None) for k, v in relaxed.items()},
+                       [(r, a, b, h._replace(end_state=None)) for r, a, b, h in holds], c_peak,
+                       e_peak, eta_peak, switches, end, time.time() - t0)
+
+
+class _Journal:
+    """A staircase's record (``staircase``): ``dir``/R{r}_f{f}.jsonl, one line per relaxation and
+    hold as it finishes, and the states it starts holds from (``keep``, ``state``) as npz files
+    beside it, so that a resumed staircase replays what it had and goes on from its last
+    equilibrium. ``Journal(None)``: records nothing (a staircase in memory)."""
+
+    def __init__(self, base, resume=False):
+        self.base = base
+        self.records = []
+        self.mem = {}
+        if base and resume and os.path.exists(base + ".jsonl"):
+            with open(base + ".jsonl") as f:
+                for line in f.read().split("\n"):
+                    try:
+                        self.records.append(json.loads(line))
+                    except ValueError:
+                        continue
+        if base:
+            from .io import atomic_write_bytes
+            atomic_write_bytes(base + ".jsonl", "".join(json.dumps(r) + "\n"
+                                                         for r in self.records).encode())
+
+    def _add(self, rec):
+        self.records.append(rec)
+        if self.base:
+            with open(self.base + ".jsonl", "a") as f:
+                f.write(json.dumps(rec) + "\n")
+                f.flush()
+                os.fsync(f.fileno())
+
+    def relaxation(self, name):
+        for r in self.records:
+            if r["kind"] == "relax" and r["name"] == name:
+                return RelaxResult(self.state("relaxed_" + name), r["outcome"], r["steps"],
+                                   r["c_loaded"], r["c_rest"], r["eta_rest"], r["ke_end"],
+                                   r["unbalanced_end"], np.asarray(r["history"], float),
+                                   r["wall_time"])
+        return None
+
+    def add_relaxation(self, name, res, c_path):
+        self.keep("relaxed_" + name, res.state)
+        self._add({"kind": "relax", "name": name, "outcome": res.outcome, "steps": res.steps,
+                   "c_loaded": res.c_loaded, "c_rest": res.c_rest, "eta_rest": res.eta_rest,
+                   "ke_end": res.ke_end, "unbalanced_end": res.unbalanced_end,
+                   "history": res.history.tolist(), "wall_time": res.wall_time,
+                   "c_path": c_path})
+
+    def hold(self, k):
+        for r in self.records:
+            if r["kind"] == "hold" and r["k"] == k:
+                return HoldResult(r["outcome"], r["steps"], np.asarray(r["history"], float),
+                                  r["creep_rate"], r["wall_time"], r["hold"], r["ke_switch"],
+                                  r["g_held"], r["wall_mass"], None)
+        return None
+
+    def add_hold(self, k, role, c_from, target, h):
+        self._add({"kind": "hold", "k": k, "role": role, "c_from": c_from, "c_target": target,
+                   "outcome": h.outcome, "steps": h.steps, "history": h.history.tolist(),
+                   "creep_rate": h.creep_rate, "wall_time": h.wall_time, "hold": h.hold,
+                   "ke_switch": h.ke_switch, "g_held": h.g_held, "wall_mass": h.wall_mass})
+
+    def keep(self, key, state):
+        if state is None:
             return
-        self._round = self._next()
+        self.mem[key] = state
+        if self.base:
+            from .io import save_state
+            save_state(f"{self.base}_{key}.npz", state)
 
-    @property
-    def done(self):
-        return not self._round
+    def state(self, key):
+        if key in self.mem:
+            return self.mem[key]
+        from .io import load_state
+        return load_state(f"{self.base}_{key}.npz")[0]
 
-    def _next(self):
-        """The next round's grid indices ([] when the search is over)."""
-        done = sorted(self.relaxed)
-        if self.path.peak is None:                 # no loaded peak: below at the path's end
-            self.below = self.end
+    def files(self):
+        """The journal and its state files."""
+        if not self.base:
             return []
-        if self.peak is None:
-            best = max(done, key=self.c)
-            lo = max([i for i in done if i < best], default=None)
-            hi = min([i for i in done if i > best], default=None)
-            need = [(a + b) // 2 for a, b in ((lo, best), (best, hi))
-                    if a is not None and b is not None and b - a > 1]
-            if need:
-                return need
-            self.peak = best
-        if self.peak == 0:                         # c at rest falls from the start: no below
-            return []
-        thr = self.c(0) + self.opts.below_rise * (self.c(self.peak) - self.c(0))
-        first = min(i for i in done if i <= self.peak and self.c(i) >= thr)
-        prev = max(i for i in done if i < first)
-        if first - prev > 1:
-            return [(prev + first) // 2]
-        self.below = first
-        return []
-
-    def switches(self):
-        """{"below"/"past": grid index} of the switches found."""
-        out = {}
-        if self.below is not None:
-            out["below"] = self.below
-        if self.peak is not None and self.confirmed:
-            out["past"] = self.peak
-        return out
+        d, b = os.path.split(self.base)
+        return [os.path.join(d, f) for f in os.listdir(d) if f.startswith(b + "_") or
+                f == b + ".jsonl"]
 
 
 H = {c: k for k, c in enumerate(HISTORY_COLUMNS[3:])}    # a hold's history columns (from "step")
@@ -401,9 +512,10 @@ class HoldResult(NamedTuple):
     creep_rate: float         # [1/s] over the last window
     wall_time: float          # [s]
     hold: str = "servo"       # "dead_load" or "servo"
-    ke_switch: float = math.nan   # E_c at the switch [J] (the disks')
+    ke_switch: float = math.nan   # the backbone's E_c at the switch [J]
     g_held: float = math.nan  # the held generalized force [N] (dead load)
     wall_mass: float = math.nan   # the walls' generalized mass m_G [kg] (dead load)
+    end_state: State | None = None    # the state at the end
 
 
 class ContactTable(NamedTuple):
@@ -505,7 +617,6 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
     t = sim.params.thickness
     d_g = sim.size[0] * t * (c_target - c_switch)     # dG [N]
     h0 = sim.ref_len[1]
-    ke_switch = sim.kinetic_energy()
     g_held = m_g = math.nan
     if opts.hold == "dead_load":
         g_held = generalized_force(g0, ratio, sim.ref_len) + d_g
@@ -537,8 +648,10 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
 
     res = settle(sim, None, opts.rule(), strain_scale=voigt_strain(sim, opts.strain_norm),
                  progress=check, stress_error=error)
+    sim.ledger.detach()
+    # E_c at the switch: the backbone's (disks with two contacts or more), as ke_growth's
     return HoldResult(res.outcome, res.steps, np.asarray(hist, float), res.creep_rate,
-                      time.time() - t0, opts.hold, ke_switch, g_held, m_g)
+                      time.time() - t0, opts.hold, hist[0][8], g_held, m_g, sim.state())
 
 
 def ke_growth(keb) -> float:
@@ -595,30 +708,10 @@ def _path_task(args):
     return proportional_path(state, ratio, opts, threads, progress)
 
 
-def _relax_task(args):
-    state, ratio, fraction, i, opts, threads, verbose = args
-    last = [time.time()]
-
-    def progress(steps, row):
-        if verbose and time.time() - last[0] > 10.0:
-            last[0] = time.time()
-            _log(f"R={ratio:g} f={fraction:g} relaxing grid state {i}: step {steps} "
-                 f"unbalanced={row[3]:.2e} c drift={row[8]:.0f} Pa backbone KE={row[2]:.2e} J")
-
-    return relax(state, ratio, opts, threads, progress)
-
-
-def _hold_task(args):
-    state, ratio, fraction, switch, c_target, opts, threads, verbose = args
-    last = [time.time()]
-
-    def progress(steps, h):
-        if verbose and time.time() - last[0] > 10.0:
-            last[0] = time.time()
-            _log(f"R={ratio:g} f={fraction:g} {switch}: step {steps} eps1={h[2]:.5f} "
-                 f"stress error={h[6]:.0f} Pa backbone KE={h[8]:.2e} J")
-
-    return hold(state, ratio, c_target, opts, threads, progress)
+def _stairs_task(args):
+    path, ratio, fraction, opts, threads, verbose, base, resume = args
+    log = (lambda m: _log(f"R={ratio:g} f={fraction:g} {m}")) if verbose else None
+    return staircase(path, ratio, opts, threads, log, _Journal(base, resume))
 
 
 def checkpoint_header(starts, ratios, opts) -> dict:
@@ -632,7 +725,7 @@ def checkpoint_header(starts, ratios, opts) -> dict:
 
 
 def read_checkpoint(out_dir, header) -> list:
-    """The finished runs of ``out_dir``/burst_runs.jsonl (none if there is no such file; a torn
+    """The finished paths of ``out_dir``/burst_runs.jsonl (none if there is no such file; a torn
     last line dropped). ValueError (``--resume``, one line) if it belongs to other start states,
     ratios or options."""
     path = os.path.join(out_dir, "burst_runs.jsonl")
@@ -651,191 +744,100 @@ def read_checkpoint(out_dir, header) -> list:
     return recs[1:]
 
 
-class _Checkpoint:
-    """``out_dir``/burst_runs.jsonl: a header (the start states' fingerprints, the ratios, the
-    options), then one line per finished run (a path, a relaxation, a hold), each written and
-    flushed as it finishes; the states a later run needs beside it in ``out_dir``/rest/. With
-    ``resume`` the finished runs are read back (a torn last line dropped) and a header of other
-    states or options is refused with ValueError; without it an earlier file is set aside."""
-
-    def __init__(self, out_dir, header, resume):
-        from .io import atomic_write_bytes
-        self.dir = os.path.join(out_dir, "rest")
-        self.path = os.path.join(out_dir, "burst_runs.jsonl")
-        self.records = read_checkpoint(out_dir, header) if resume else []
-        if not resume and os.path.exists(self.path):
-            os.replace(self.path, self.path[:-len(".jsonl")] + ".previous.jsonl")
-        atomic_write_bytes(self.path, ("\n".join(json.dumps(r) for r in [header] + self.records)
-                                       + "\n").encode())
-        os.makedirs(self.dir, exist_ok=True)
-        self.sink = open(self.path, "a")
-
-    def add(self, rec):
-        self.sink.write(json.dumps(rec) + "\n")
-        self.sink.flush()
-        os.fsync(self.sink.fileno())
-
-    def state_path(self, ratio, fraction, kind, i):
-        return os.path.join(self.dir, f"R{ratio:g}_f{fraction:g}_{kind}{i:04d}.npz")
-
-    def close(self):
-        self.sink.close()
-
-
 def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = BurstOptions(),
               workers=None, threads=None, verbose=True, params_file=None, stage=None,
               resume=False, scheduler=None):
-    """Every proportional path (one per ratio and start fraction), then the rest search of
-    every path (``RestSearch``: rounds of relaxations at fixed strain), then the holds of every
-    switch from its relaxed state, each an independent run spread over ``workers`` local
-    processes or a dask cluster at ``scheduler`` (one thread each; ``threads`` in a single
-    process). Every finished run goes to ``out_dir``/burst_runs.jsonl (``resume`` continues
-    from it, refusing one of other states or options). Writes ``out_dir``/burst.csv,
-    history.csv, paths.csv, rest.csv, summary.json, params.json, the relaxed switch states
-    (rest/) and the figures. Returns (burst rows as dicts, summary dict)."""
+    """Every proportional path (one per ratio and start fraction), then the rest search of every
+    path (``staircase``: its start relaxed at fixed strain, then G held by steps from rest until
+    a hold of +dc fails; the below and past runs), each path's task an independent run spread
+    over ``workers`` local processes or a dask cluster at ``scheduler`` (one thread each;
+    ``threads`` in a single process). Every finished path goes to ``out_dir``/burst_runs.jsonl
+    and every relaxation and hold of a staircase to its journal in ``out_dir``/rest/, so that
+    ``resume`` continues from them (refusing a folder of other states or options). Writes
+    ``out_dir``/burst.csv, history.csv, paths.csv, rest.csv, stairs.csv, summary.json,
+    params.json, the states the switches started from (rest/) and the figures. Returns (burst
+    rows as dicts, summary dict)."""
     from . import io
+    from .io import atomic_write_bytes
     from .probes import _map
     ratios = [check_ratio(float(r)) for r in ratios]
     starts, eta_peak, params = load_starts(biaxial_dir, fractions, params_file)
     opts.validate(params.n)
     header = checkpoint_header(starts, ratios, opts)
-    if resume:
-        read_checkpoint(out_dir, header)      # refused before anything is written
+    done = read_checkpoint(out_dir, header) if resume else []   # refused before any write
     t0 = time.time()
-    os.makedirs(out_dir, exist_ok=True)
+    os.makedirs(os.path.join(out_dir, "rest"), exist_ok=True)
     # the parameters the run used, in the shared file format (``--params DIR/params.json``)
     from .params import record_params
     record_params(out_dir, params, f"python -m dem burst; parameters: the start states' own "
                                    f"(--biaxial {biaxial_dir})")
+    ck = os.path.join(out_dir, "burst_runs.jsonl")
+    if not resume and os.path.exists(ck):
+        os.replace(ck, ck[:-len(".jsonl")] + ".previous.jsonl")
+    atomic_write_bytes(ck, "".join(json.dumps(r) + "\n" for r in [header] + done).encode())
     combos = [(r, f, st) for r in ratios for f, st, _ in starts]
-    ck = _Checkpoint(out_dir, header, resume)
     # a run in a pool of processes runs on one thread; alone in this process, on ``threads``
     # (None: dem.threads chooses)
     per_run = lambda tasks: (threads if threads is not None or (workers == 1 and not scheduler)
                              or len(tasks) == 1 else 1)
     log = _log if verbose else (lambda m: None)
     log(f"{len(combos)} proportional paths ({params.n} disks, rate {opts.rate:g}/s): R in "
-        f"{ratios}, start fractions {list(fractions)}; the c peak at rest (states relaxed at "
-        f"fixed strain); below at {opts.below_rise:g} of the rise at rest; held at c_rest + "
-        f"{opts.dc:g} Pa by a {'dead load' if opts.hold == 'dead_load' else 'servo'}")
-    paths, searches, runs = {}, {}, {}
-    avail = {}                                # (r, f, grid index) -> RelaxResult (no state)
-    for rec in ck.records:                    # what a resumed run has already
+        f"{ratios}, start fractions {list(fractions)}; then from rest (the start relaxed at "
+        f"fixed strain) G held by steps ({'dead load' if opts.hold == 'dead_load' else 'servo'})"
+        f" until a step of {opts.dc:g} Pa fails: the c peak at rest; below at "
+        f"{opts.below_rise:g} of the rise at rest")
+    paths, stairs = {}, {}
+    for rec in done:
         key = (rec["ratio"], rec["start_fraction"])
-        if rec["kind"] == "path":
-            grid = [(row, None) for row in rec["grid"]]
-            paths[key] = PathResult(np.asarray(rec["rows"], float), rec["peak"],
-                                    rec["confirmed_by"], grid, rec["steps"], rec["wall_time"])
-        elif rec["kind"] == "relax":
-            avail[key + (rec["grid"],)] = RelaxResult(
-                None, rec["outcome"], rec["steps"], rec["c_loaded"], rec["c_rest"],
-                rec["eta_rest"], rec["ke_end"], rec["unbalanced_end"],
-                np.asarray(rec["history"], float), rec["wall_time"])
-        elif rec["kind"] == "hold":
-            runs[key + (rec["switch"],)] = HoldResult(
-                rec["outcome"], rec["steps"], np.asarray(rec["history"], float),
-                rec["creep_rate"], rec["wall_time"], rec["hold"], rec["ke_switch"],
-                rec["g_held"], rec["wall_mass"])
-    if ck.records:
-        log(f"resumed from {ck.path}: {len(paths)} paths, {len(avail)} relaxations, "
-            f"{len(runs)} holds finished")
-    try:
-        if stage:
-            stage.at("dem burst: the proportional paths")
+        grid = [(row, io.load_state(os.path.join(out_dir, "rest", f"{_base(*key)}_path{i}.npz"))[0])
+                for i, row in enumerate(rec["grid"])]
+        paths[key] = PathResult(np.asarray(rec["rows"], float), rec["peak"],
+                                rec["confirmed_by"], grid, rec["steps"], rec["wall_time"])
+    if done:
+        log(f"resumed from {ck}: {len(paths)} paths finished")
+    if stage:
+        stage.at("dem burst: the proportional paths")
 
-        def got_path(key, res):
-            r, f = key
-            for i, (_, st) in enumerate(res.grid):
-                io.save_state(ck.state_path(r, f, "grid", i), st)
-            ck.add({"kind": "path", "ratio": r, "start_fraction": f, "rows": res.rows.tolist(),
-                    "peak": res.peak, "confirmed_by": res.confirmed_by,
-                    "grid": [row for row, _ in res.grid], "steps": res.steps,
-                    "wall_time": res.wall_time})
-            paths[key] = res
-            pk = (f"loaded c peak {res.rows[res.peak, 8] / 1e3:.2f} kPa at eta "
-                  f"{res.rows[res.peak, 7]:.4f} (confirmed by {res.confirmed_by})"
-                  if res.peak is not None else "the specimen unloaded"
-                  if res.confirmed_by == "unloaded" else "no c peak")
-            log(f"R={r:g} f={f:g} path: {pk}, {res.steps} steps, {res.wall_time:.0f} s")
+    def got_path(key, res):
+        r, f = key
+        for i, (_, st) in enumerate(res.grid):
+            io.save_state(os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz"), st)
+        with open(ck, "a") as fh:
+            fh.write(json.dumps({"kind": "path", "ratio": r, "start_fraction": f,
+                                 "rows": res.rows.tolist(), "peak": res.peak,
+                                 "confirmed_by": res.confirmed_by,
+                                 "grid": [row for row, _ in res.grid], "steps": res.steps,
+                                 "wall_time": res.wall_time}) + "\n")
+        paths[key] = res
+        pk = (f"loaded c peak {res.rows[res.peak, 8] / 1e3:.2f} kPa at eta "
+              f"{res.rows[res.peak, 7]:.4f} (confirmed by {res.confirmed_by})"
+              if res.peak is not None else "the specimen unloaded"
+              if res.confirmed_by == "unloaded" else "no c peak")
+        log(f"R={r:g} f={f:g} path: {pk}, {res.steps} steps, {res.wall_time:.0f} s")
 
-        todo = [(r, f, st) for r, f, st in combos if (r, f) not in paths]
-        _map([((r, f), (st, r, f, opts, per_run(todo), verbose)) for r, f, st in todo],
-             got_path, workers, scheduler, fn=_path_task)
+    todo = [(r, f, st) for r, f, st in combos if (r, f) not in paths]
+    _map([((r, f), (st, r, f, opts, per_run(todo), verbose)) for r, f, st in todo],
+         got_path, workers, scheduler, fn=_path_task)
+    if stage:
+        stage.at("dem burst: the rest search (from rest, G held by steps)")
+    tasks = [((r, f), (paths[(r, f)], r, f, opts, None, verbose,
+                       os.path.join(out_dir, "rest", _base(r, f)), resume))
+             for r, f, _ in combos if paths[(r, f)].confirmed_by != "unloaded"]
+    tasks = [(k, a[:4] + (per_run(tasks),) + a[5:]) for k, a in tasks]
 
-        if stage:
-            stage.at("dem burst: the rest search (relaxations at fixed strain)")
-        grid_state = lambda r, f, i: (paths[(r, f)].grid[i][1] if paths[(r, f)].grid[i][1]
-                                      is not None else
-                                      io.load_state(ck.state_path(r, f, "grid", i))[0])
-        for r, f, _ in combos:
-            if paths[(r, f)].confirmed_by != "unloaded":
-                searches[(r, f)] = RestSearch(paths[(r, f)], opts)
+    def got_stairs(key, res):
+        stairs[key] = res
+        log(f"R={key[0]:g} f={key[1]:g}: {res.end}, {len(res.holds)} holds, "
+            f"{res.wall_time:.0f} s")
 
-        def got_relax(key, res):
-            r, f, i = key
-            io.save_state(ck.state_path(r, f, "relaxed", i), res.state)
-            ck.add({"kind": "relax", "ratio": r, "start_fraction": f, "grid": i,
-                    "row": paths[(r, f)].grid[i][0], "outcome": res.outcome, "steps": res.steps,
-                    "c_loaded": res.c_loaded, "c_rest": res.c_rest, "eta_rest": res.eta_rest,
-                    "ke_end": res.ke_end, "unbalanced_end": res.unbalanced_end,
-                    "history": res.history.tolist(), "wall_time": res.wall_time})
-            avail[key] = res._replace(state=None)
-            log(f"R={r:g} f={f:g} grid state {i} (eps1 "
-                f"{paths[(r, f)].rows[paths[(r, f)].grid[i][0], 1]:.5f}) relaxed: c "
-                f"{res.c_loaded / 1e3:.2f} -> {res.c_rest / 1e3:.2f} kPa, {res.outcome} after "
-                f"{res.steps} steps")
-
-        while True:                     # rounds of relaxations, every path's in one pool
-            for key, srch in searches.items():
-                got = {i: avail[key + (i,)] for i in srch.todo() if key + (i,) in avail}
-                while got:
-                    srch.add(got)
-                    got = {i: avail[key + (i,)] for i in srch.todo() if key + (i,) in avail}
-            tasks = [((r, f, i), (grid_state(r, f, i), r, f, i, opts))
-                     for (r, f), srch in searches.items() for i in srch.todo()]
-            if not tasks:
-                break
-            _map([(k, a + (per_run(tasks), verbose)) for k, a in tasks], got_relax, workers,
-                 scheduler, fn=_relax_task)
-        for (r, f), srch in searches.items():
-            sw = srch.switches()
-            txt = ", ".join(f"{k} at grid state {i} (c at rest {srch.c(i) / 1e3:.2f} kPa)"
-                            for k, i in sw.items())
-            log(f"R={r:g} f={f:g} rest search: {len(srch.relaxed)} relaxations; {txt or 'none'}")
-
-        if stage:
-            stage.at("dem burst: the held runs from rest")
-        holds = []
-        for (r, f), srch in searches.items():
-            for sw, i in srch.switches().items():
-                if (r, f, sw) in runs:
-                    continue
-                st, _ = io.load_state(ck.state_path(r, f, "relaxed", i))
-                holds.append(((r, f, sw), (st, r, f, sw, srch.c(i) + opts.dc, opts, None,
-                                           verbose)))
-        holds = [(k, a[:6] + (per_run(holds),) + a[7:]) for k, a in holds]
-
-        def got_run(key, res):
-            r, f, sw = key
-            ck.add({"kind": "hold", "ratio": r, "start_fraction": f, "switch": sw,
-                    "outcome": res.outcome, "steps": res.steps, "history": res.history.tolist(),
-                    "creep_rate": res.creep_rate, "wall_time": res.wall_time, "hold": res.hold,
-                    "ke_switch": res.ke_switch, "g_held": res.g_held,
-                    "wall_mass": res.wall_mass})
-            runs[key] = res
-            log(f"R={r:g} f={f:g} {sw}: {res.outcome} after {res.steps} steps "
-                f"({res.wall_time:.0f} s)")
-
-        _map(holds, got_run, workers, scheduler, fn=_hold_task)
-    finally:
-        ck.close()
+    _map(tasks, got_stairs, workers, scheduler, fn=_stairs_task)
     rows = []
     for r, f, st in combos:
-        if (r, f) not in searches:
+        if (r, f) not in stairs:
             continue
-        for sw, i in searches[(r, f)].switches().items():
-            rows.append(burst_row(r, f, sw, paths[(r, f)], searches[(r, f)], i,
-                                  runs[(r, f, sw)], opts, eta_peak, params.n))
+        for sw, i in sorted(stairs[(r, f)].switches.items(), key=lambda x: SWITCHES.index(x[0])):
+            rows.append(burst_row(r, f, sw, paths[(r, f)], stairs[(r, f)], i, opts, eta_peak,
+                                  params.n))
     summary = {"biaxial": os.path.abspath(biaxial_dir), "n_disks": params.n,
                "drained_eta_peak": eta_peak, "ratios": ratios, "start_fractions": list(fractions),
                "options": opts._asdict(), "params": params.to_dict(), "dt": params.dt,
@@ -843,43 +845,71 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
                "paths": [{"ratio": r, "start_fraction": f, "steps": paths[(r, f)].steps,
                           "wall_time": paths[(r, f)].wall_time,
                           "end": (paths[(r, f)].confirmed_by or "path_strain reached"),
-                          "relaxations": len(searches[(r, f)].relaxed) if (r, f) in searches
-                          else 0} for r, f, _ in combos],
+                          "rest_search": stairs[(r, f)].end if (r, f) in stairs else None,
+                          "holds": len(stairs[(r, f)].holds) if (r, f) in stairs else 0,
+                          "rest_search_wall_time": stairs[(r, f)].wall_time
+                          if (r, f) in stairs else None} for r, f, _ in combos],
                "runs": [{k: row[k] for k in ("ratio", "start_fraction", "switch", "outcome",
-                                             "steps")} | {"wall_time": runs[(row["ratio"],
-                        row["start_fraction"], row["switch"])].wall_time} for row in rows],
+                                             "steps", "ke_growth")} for row in rows],
                "wall_time": time.time() - t0}
-    write_burst_files(out_dir, combos, paths, searches, runs, rows, summary)
-    for r, f, _ in combos:            # the grid's states served the search: only the switches'
-        keep = set(searches[(r, f)].switches().values()) if (r, f) in searches else set()
-        for i in range(len(paths[(r, f)].grid)):
-            for kind in ("grid", "relaxed"):
-                path = ck.state_path(r, f, kind, i)
-                if os.path.exists(path) and not (kind == "relaxed" and i in keep):
-                    os.unlink(path)
+    write_burst_files(out_dir, combos, paths, stairs, rows, summary)
+    # the states the switches started from stay (rest/R.._f.._switch.npz); the rest served the
+    # search and a resume
+    from .io import save_state
+    for r, f, _ in combos:
+        j = _Journal(os.path.join(out_dir, "rest", _base(r, f)), resume=True)
+        keep = {}
+        if (r, f) in stairs:
+            res = stairs[(r, f)]
+            keep = {sw: j.state(_switch_key(res, i)) for sw, i in res.switches.items()}
+        for path in j.files() + [os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz")
+                                 for i in range(2)]:
+            if os.path.exists(path):
+                os.unlink(path)
+        for sw, st in keep.items():
+            save_state(os.path.join(out_dir, "rest", f"{_base(r, f)}_{sw}.npz"), st)
     return rows, summary
 
 
-def burst_row(ratio, fraction, switch, path: PathResult, search: RestSearch, i, run: HoldResult,
-              opts, eta_peak, n):
+def _base(ratio, fraction):
+    return f"R{ratio:g}_f{fraction:g}"
+
+
+def _switch_key(res: StairResult, i):
+    """The journal's key of the state hold ``i`` of a staircase started from: the start, or the
+    end of the last equilibrium hold before it (for the below run: the equilibrium it was
+    chosen from)."""
+    role, c_from, _, _ = res.holds[i]
+    if res.end == "no loaded peak":
+        return "end"
+    keys = ["start"] + [f"eq{k}" for k, (ro, _, _, h) in enumerate(res.holds)
+                        if ro == "stair" and h.outcome == "equilibrium"]
+    cs = [res.relaxed["start"].c_rest] + [h.history[-1, 4] for ro, _, _, h in res.holds
+                                           if ro == "stair" and h.outcome == "equilibrium"]
+    return keys[int(np.argmin(np.abs(np.asarray(cs) - c_from)))]
+
+
+def burst_row(ratio, fraction, switch, path: PathResult, res: StairResult, i, opts, eta_peak, n):
     """One row of burst.csv (BURST_COLUMNS) as a dict: the path (its loaded peak), the rest
-    search (the peak at rest, the relaxed switch state, grid index ``i``), the hold."""
+    search (the c peak at rest, the switch's hold ``i``: its start at rest, its target)."""
     pr = path.rows
-    grid_row = lambda j: path.grid[j][0]
+    role, c_from, c_target, run = res.holds[i]
     h = run.history
-    pk = search.peak if search.confirmed else None
-    rx = search.relaxed
     nan = math.nan
     lpk = path.peak
-    return {"ratio": ratio, "start_fraction": fraction, "eta_start": rx[0].eta_rest,
-            "eta_peak_c": rx[pk].eta_rest if pk is not None else nan,
-            "fraction_peak_c": rx[pk].eta_rest / eta_peak if pk is not None else nan,
-            "eps1_peak_c": pr[grid_row(pk), 1] - pr[0, 1] if pk is not None else nan,
-            "c_start": rx[0].c_rest, "c_peak": rx[pk].c_rest if pk is not None else nan,
+    rs = res.relaxed["start"]
+    eps_sw = h[0, 2]
+    c_loaded = float(np.interp(eps_sw, pr[:, 1], pr[:, 8])) if eps_sw <= pr[-1, 1] else nan
+    peak = res.end == "past found"
+    eta_sw = (h[0, 10] - h[0, 11]) / (0.5 * (h[0, 10] + h[0, 11]))
+    return {"ratio": ratio, "start_fraction": fraction, "eta_start": rs.eta_rest,
+            "eta_peak_c": res.eta_peak if peak else nan,
+            "fraction_peak_c": res.eta_peak / eta_peak if peak else nan,
+            "eps1_peak_c": res.eps1_peak - pr[0, 1] if peak else nan,
+            "c_start": rs.c_rest, "c_peak": res.c_peak if peak else nan,
             "peak_confirmed_by": path.confirmed_by, "switch": switch,
-            "eta_switch": rx[i].eta_rest, "eps1_switch": pr[grid_row(i), 1],
-            "c_switch": rx[i].c_rest, "dc": opts.dc, "c_target": rx[i].c_rest + opts.dc,
-            "outcome": run.outcome,
+            "eta_switch": eta_sw, "eps1_switch": eps_sw, "c_switch": h[0, 4],
+            "dc": c_target - c_from, "c_target": c_target, "outcome": run.outcome,
             "ke_growth": ke_growth(h[:, 8]), "ke_max": float(h[:, 7].max()),
             "ke_backbone_max": float(h[:, 8].max()), "w2_ext_end": h[-1, H["w2_ext"]],
             "w2_walls_end": h[-1, H["w2_walls"]], "w2_int_end": h[-1, H["w2_int"]],
@@ -890,30 +920,41 @@ def burst_row(ratio, fraction, switch, path: PathResult, search: RestSearch, i, 
             "w2_ext_held_end": h[-1, H["w2_ext_held"]],
             "w2_int_secant_end": h[-1, H["w2_int_secant"]], "w_damp_end": h[-1, H["w_damp"]],
             "u0_end": h[-1, H["u0"]], "eq1_residual": float(np.max(h[:, H["eq1_residual"]])),
-            "ke_switch": run.ke_switch, "c_rest": rx[i].c_rest, "c_loaded": rx[i].c_loaded,
+            "ke_switch": run.ke_switch, "c_rest": h[0, 4], "c_loaded": c_loaded,
             "hold": run.hold, "c_peak_loaded": pr[lpk, 8] if lpk is not None else nan,
             "eta_peak_loaded": pr[lpk, 7] if lpk is not None else nan,
             "wall_mass": run.wall_mass, "g_held": run.g_held,
-            "relaxations": len(rx), "relax_outcome": rx[i].outcome}
+            "holds": len(res.holds), "rest_search": res.end}
 
 
-def write_burst_files(out_dir, combos, paths, searches, runs, rows, summary):
-    """burst.csv, history.csv, paths.csv, rest.csv, summary.json and the figures."""
+def write_burst_files(out_dir, combos, paths, stairs, rows, summary):
+    """burst.csv, history.csv (the below and past runs), paths.csv, rest.csv (the relaxations),
+    stairs.csv (every hold of every staircase), summary.json and the figures."""
     from . import io
     io.write_csv(os.path.join(out_dir, "burst.csv"), BURST_COLUMNS,
                  [[r[c] for c in BURST_COLUMNS] for r in rows])
-    io.write_csv(os.path.join(out_dir, "rest.csv"), REST_COLUMNS,
-                 [[r, f, i, paths[(r, f)].grid[i][0], paths[(r, f)].rows[paths[(r, f)].grid[i][0], 1],
-                   x.c_loaded, x.c_rest, x.eta_rest, x.outcome, x.steps, x.ke_end,
-                   x.unbalanced_end] for (r, f), srch in searches.items()
-                  for i, x in sorted(srch.relaxed.items())])
+    runs = {(r, f, sw): stairs[(r, f)].holds[i][3] for (r, f), res in stairs.items()
+            for sw, i in res.switches.items()}
     io.write_csv(os.path.join(out_dir, "history.csv"), HISTORY_COLUMNS,
                  [[r, f, sw] + list(h) for (r, f, sw), run in runs.items() for h in run.history])
     io.write_csv(os.path.join(out_dir, "paths.csv"), PATH_COLUMNS,
                  [[r, f] + list(x) for r, f, _ in combos for x in paths[(r, f)].rows])
+    rest = []
+    for (r, f), res in stairs.items():
+        for name, x in res.relaxed.items():
+            row = paths[(r, f)].grid[0 if name == "start" else 1][0]
+            rest.append([r, f, name, paths[(r, f)].rows[row, 1], x.c_loaded, x.c_rest,
+                         x.c_loaded - x.c_rest, x.eta_rest, x.outcome, x.steps, x.ke_end,
+                         x.unbalanced_end])
+    io.write_csv(os.path.join(out_dir, "rest.csv"), REST_COLUMNS, rest)
+    io.write_csv(os.path.join(out_dir, "stairs.csv"), STAIR_COLUMNS,
+                 [[r, f, k, role, a, b, b - a, h.outcome, h.steps, h.history[0, 2],
+                   h.history[-1, 2], h.history[-1, 4], h.ke_switch, float(h.history[:, 8].max()),
+                   h.history[-1, H["w2_int"]], float(np.max(h.history[:, H["eq1_residual"]]))]
+                  for (r, f), res in stairs.items() for k, (role, a, b, h) in enumerate(res.holds)])
     io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
-    plot_burst(out_dir, combos, paths, searches, runs, summary)
+    plot_burst(out_dir, combos, paths, stairs, runs, summary)
     from .ledger import plot_ledger
     for r, f, _ in combos[:1]:          # Eq. 1's terms of the first path's holds
         panels = [(f"R = {r:g}, f = {f:g}, {sw}: {runs[(r, f, sw)].outcome} "
@@ -926,12 +967,14 @@ def write_burst_files(out_dir, combos, paths, searches, runs, rows, summary):
 OUTCOME_COLOR = {"equilibrium": "C2", "failure": "C3", "undecided": "0.5"}
 
 
-def plot_burst(out_dir, combos, paths, searches, runs, summary):
-    """fig_burst_c.png: c against eps1 along every path (loaded), the c its relaxed states keep
-    at rest (dots), the loaded peak (open star) and the peak at rest (filled star), the switches
-    (at rest) and each held run's (eps1, c) from its switch; fig_burst_ke.png: the backbone
-    kinetic energy against the time since the switch (log axes: from rest it spans decades);
-    fig_burst_strain.png: the strains since the switch against time (log axis)."""
+def plot_burst(out_dir, combos, paths, stairs, runs, summary):
+    """fig_burst_c.png: c against eps1 along every path (loaded, under strain control), the
+    loaded peak (open star), the path's start and loaded peak relaxed at fixed strain (open
+    circles), the staircase of holds from rest (each hold's end: green at equilibrium, red when
+    it failed) and its c peak at rest (filled star), the below and past runs from their
+    switches; fig_burst_ke.png: the backbone kinetic energy against the time since the switch
+    (log axes: from rest it spans decades); fig_burst_strain.png: the strains since the switch
+    against time (log axis)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -943,33 +986,43 @@ def plot_burst(out_dir, combos, paths, searches, runs, summary):
         p = paths[(r, f)]
         col = f"C{j % 10}" if j % 10 not in (2, 3) else f"C{j % 10 + 5}"
         ax.plot(p.rows[:, 1] * 100, p.rows[:, 8] / 1e3, "-", lw=0.8, color=col,
-                label=f"path R = {r:g} from {f:g} of the drained peak")
+                label=f"path R = {r:g} from {f:g} of the drained peak (strain control)")
         if p.peak is not None:
             ax.plot(p.rows[p.peak, 1] * 100, p.rows[p.peak, 8] / 1e3, "*", ms=12, mfc="w",
                     mec=col, mew=1.0)
-        srch = searches.get((r, f))
-        if srch is None:
+        res = stairs.get((r, f))
+        if res is None:
             continue
-        rel = sorted(srch.relaxed)
-        e_rel = [p.rows[p.grid[i][0], 1] * 100 for i in rel]
-        ax.plot(e_rel, [srch.c(i) / 1e3 for i in rel], ".:", color=col, ms=5, lw=0.8)
-        if srch.peak is not None and srch.confirmed:
-            ax.plot(p.rows[p.grid[srch.peak][0], 1] * 100, srch.c(srch.peak) / 1e3, "*", ms=13,
-                    color=col, mec="k", mew=0.5)
+        for (row, _), x in zip(p.grid, res.relaxed.values()):
+            ax.plot([p.rows[row, 1] * 100] * 2, [x.c_loaded / 1e3, x.c_rest / 1e3], "-",
+                    color="0.5", lw=0.8)
+            ax.plot(p.rows[row, 1] * 100, x.c_rest / 1e3, "o", ms=6, mfc="w", mec=col)
+        for role, _, target, h in res.holds:
+            if role == "stair" and h.outcome == "equilibrium":    # where it came to rest
+                ax.plot(h.history[-1, 2] * 100, h.history[-1, 4] / 1e3, "s", ms=4,
+                        color=OUTCOME_COLOR[h.outcome])
+            elif role == "stair":                                 # the c it could not hold
+                ax.plot(h.history[0, 2] * 100, target / 1e3, "x", ms=5,
+                        color=OUTCOME_COLOR[h.outcome])
+        if res.end == "past found":
+            ax.plot(res.eps1_peak * 100, res.c_peak / 1e3, "*", ms=13, color=col, mec="k",
+                    mew=0.5)
         for sw, mk in zip(SWITCHES, "ov"):
             if (r, f, sw) not in runs:
                 continue
             h = runs[(r, f, sw)].history
             oc = runs[(r, f, sw)].outcome
             ax.plot(h[:, 2] * 100, h[:, 4] / 1e3, "-", lw=1.2, color=OUTCOME_COLOR[oc], alpha=0.7)
-            i = srch.switches()[sw]
-            ax.plot(p.rows[p.grid[i][0], 1] * 100, srch.c(i) / 1e3, mk, ms=8,
-                    mfc=OUTCOME_COLOR[oc], mec="k")
+            ax.plot(h[0, 2] * 100, h[0, 4] / 1e3, mk, ms=8, mfc=OUTCOME_COLOR[oc], mec="k")
     ax.plot([], [], "*", mfc="w", mec="0.3", ms=10, label="c peak of the loaded path")
-    ax.plot([], [], ".:", color="0.3", label="c at rest (states relaxed at fixed strain)")
-    ax.plot([], [], "*", color="0.3", ms=10, mec="k", label="c peak at rest")
-    ax.plot([], [], "o", mfc="w", mec="k", label="below switch (at rest)")
-    ax.plot([], [], "v", mfc="w", mec="k", label="past switch (the peak at rest)")
+    ax.plot([], [], "o", mfc="w", mec="0.3", label="relaxed at fixed strain (drop: grey)")
+    ax.plot([], [], "s", color=OUTCOME_COLOR["equilibrium"], ms=4,
+            label="staircase from rest: held (end of each hold)")
+    ax.plot([], [], "x", color=OUTCOME_COLOR["failure"], ms=5,
+            label="staircase: the c a hold failed to hold")
+    ax.plot([], [], "*", color="0.3", ms=10, mec="k", label="c peak at rest (largest c held)")
+    ax.plot([], [], "o", mfc="w", mec="k", label="below switch (from rest)")
+    ax.plot([], [], "v", mfc="w", mec="k", label="past switch: the peak at rest + dc")
     for oc, col in OUTCOME_COLOR.items():
         ax.plot([], [], "-", color=col, lw=1.5, label=f"run after the switch: {oc}")
     ax.set_xlabel(r"axial strain $\varepsilon_1$ [%]")

@@ -586,7 +586,7 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
                      "reached either.")
     if c.get("burst"):
         from .crosscheck_burst import burst_report_lines
-        L += [""] + burst_report_lines(c["burst"], figs.get("burst"))
+        L += [""] + burst_report_lines(c["burst"], figs.get("burst"), figs.get("burst_eq1"))
     L += ["", "## Wall times", ""] + [f"- {k}: {v:.1f} s" for k, v in timings.items()] + [""]
     with atomic_open(os.path.join(out, "report.md")) as f:
         f.write("\n".join(L))
@@ -675,6 +675,9 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
         c["burst"] = cb.burst_conclusions(bparts, d200[0]["eta_w2"] if d200 else None,
                                           (fem["summary"] or {}).get("events"))
         figs["burst"] = cb.burst_figure(out_dir, bparts)
+        figs["burst_eq1"] = cb.burst_eq1_figure(
+            out_dir, os.path.join(out_dir, "burst", "fem", "history.csv"),
+            os.path.join(out_dir, "burst", "dem", "history.csv"))
     config = {"full": full, "dem_n": n, "dem_seed": seed, "dem_rate": rate,
               "dem_params": (os.path.abspath(dem_params) if dem_params else
                              "the paper's stated set (kn/D 32 GPa, kt/kn 0.42, 35 deg)"),

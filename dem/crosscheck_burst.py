@@ -17,7 +17,8 @@ import os
 
 import numpy as np
 
-__all__ = ["burst_part", "burst_conclusions", "burst_figure", "burst_report_lines",
+__all__ = ["burst_part", "burst_conclusions", "burst_figure", "burst_eq1_figure",
+           "burst_report_lines",
            "BURST_RATIOS", "BURST_FRACTIONS"]
 
 BURST_RATIOS = (-2.0,)
@@ -158,8 +159,8 @@ def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
     ax.plot([], [], "ko", ls="none", label="end: equilibrium")
     ax.set_xlabel("time since the switch to c control [s]")
     ax.set_ylabel(r"kinetic energy per volume $E_c/V$ [J/m$^3$]")
-    ax.set_title("The burst of kinetic energy (Eq. 1): c = s1 + R s2 held below / past its peak\n"
-                 "(DEM: the disks with two contacts or more, moving at the path's rate at the switch)",
+    ax.set_title("The burst of kinetic energy (Eq. 1): c = s1 + R s2 held below / past its peak,\n"
+                 "from rest (DEM: the disks with two contacts or more, a dead load on the walls)",
                  fontsize=9)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
@@ -167,15 +168,76 @@ def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
     return name
 
 
-def burst_report_lines(c: dict, fig: str | None) -> list:
+def burst_eq1_figure(out, fem_history, dem_history, name="fig_burst_eq1.png") -> str | None:
+    """Eq. 1's terms of the past runs against the time since the switch, the FE specimen's
+    (history.csv of fem burst: E_c = W2_ext - W2_int - D, Newmark's discrete balance) beside the
+    DEM sample's (history.csv of dem burst: E_c - E_c(0) = W2_ext - W2_int + W_damp + U0, the
+    energy ledger), one panel each, symmetric log axes: who gives the kinetic energy. None when
+    a part has no past run."""
+    import csv
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from hmodel.io import save_figure
+
+    def past(path):
+        if not path or not os.path.exists(path):
+            return None
+        with open(path) as f:
+            rows = [r for r in csv.DictReader(f) if r["switch"] == "past"]
+        if not rows:
+            return None
+        first = (rows[0]["ratio"], rows[0]["start_fraction"])
+        rows = [r for r in rows if (r["ratio"], r["start_fraction"]) == first]
+        return {k: np.array([float(r[k]) for r in rows]) for k in rows[0] if k != "switch"}
+
+    fe, dm = past(fem_history), past(dem_history)
+    if fe is None or dm is None:
+        return None
+    panels = [("FE perfect specimen: E_c = W2_ext - W2_int - D", fe["t"],
+               [(fe["ke"], r"$E_c$", "k", 2.2), (fe["w2_ext"], r"$W_2^{ext}$", "C0", 1.4),
+                (-fe["w2_int"], r"$-W_2^{int}$", "C3", 1.4),
+                (-fe["damping"], r"$-D$ (Rayleigh damping)", "C2", 1.4)]),
+              ("DEM sample: E_c - E_c(0) = W2_ext - W2_int + W_damp + U0", dm["t_ledger"],
+               [(dm["dke"], r"$E_c - E_c(0)$", "k", 2.2), (dm["w2_ext"], r"$W_2^{ext}$", "C0", 1.4),
+                (-dm["w2_int"], r"$-W_2^{int}$", "C3", 1.4),
+                (dm["w_damp"], r"$W_{damp}$ (Cundall damping)", "C2", 1.4),
+                (dm["u0"], r"$U_0$", "C4", 1.0)])]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), constrained_layout=True)
+    for ax, (title, t, terms) in zip(axes, panels):
+        for y, lab, col, lw in terms:
+            ax.plot(t, y, "-", color=col, lw=lw, label=lab)
+        big = max(float(np.max(np.abs(y))) for y, *_ in terms)
+        ax.set_yscale("symlog", linthresh=max(1e-4 * big, 1e-15))
+        ax.axhline(0, color="0.5", lw=0.6)
+        ax.set_xlabel("time since the switch [s]")
+        ax.set_ylabel("energy since the switch [J/m]" if "FE" in title else
+                      "energy since the switch [J]")
+        ax.set_title(f"past the c peak - {title}", fontsize=9)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, loc="best")
+    save_figure(fig, os.path.join(out, name))
+    return name
+
+
+def burst_report_lines(c: dict, fig: str | None, fig_eq1: str | None = None) -> list:
     """The report's burst section: per ratio and start fraction, each part's c peak and switch
-    outcomes, then the verdict with its numbers."""
+    outcomes, then the verdict with its numbers (the growth of E_c from rest past the peak)."""
     L = ["## Failure made to happen: the proportional strain path and the burst (Eq. 1)", "",
          "From the drained state at f of each part's drained peak eta, the path d eps2 = R d eps1 "
-         "under strain control until c = s1 + R s2 peaks (W2 = d eps1 dc = 0 there), then c held "
-         "below the peak (`below`) and past it (`past`) with the tie kept (docs/burst.md).", ""]
+         "until c = s1 + R s2 peaks (W2 = d eps1 dc = 0 there), then c held below the peak "
+         "(`below`) and past it (`past`) with the tie kept, from rest (docs/burst.md). The "
+         "material point and the FE follow the path quasi-statically and switch from their static "
+         "states; the DEM finds its peak at rest by a staircase of dead-load holds from its "
+         "relaxed start (its strain-controlled path carries a rate overstress) and switches from "
+         "its equilibria.", ""]
     if fig:
         L += [f"![burst]({fig})", ""]
+    if fig_eq1:
+        L += ["Eq. 1's terms of the past runs, the FE's beside the DEM's (who gives the kinetic "
+              "energy: -W2_int > 0, the contacts or the material points):", "",
+              f"![Eq. 1]({fig_eq1})", ""]
     L += ["| part | R | f | eta_start | eta of the c peak (fraction of the drained peak) | below | "
           "past | E_c growth past |", "|---|---|---|---|---|---|---|---|"]
     fmt = lambda x, s: "-" if x is None or not np.isfinite(x) else format(x, s)
@@ -190,10 +252,15 @@ def burst_report_lines(c: dict, fig: str | None) -> list:
     exact = {n: all(d["at_w2_zero"] for d in p["paths"] if d["peaked"]) and
              any(d["peaked"] for d in p["paths"]) for n, p in c["parts"].items()}
     und = sum(d["undecided"] for p in c["parts"].values() for d in p["paths"])
+    growth = lambda n: [d["ke_growth_past"] for d in c["parts"][n]["paths"]
+                        if d["ke_growth_past"] is not None and np.isfinite(d["ke_growth_past"])]
     s = ("**Where failure came.** " + "; ".join(
         f"{LABEL[n]}: " + ("below settled and past failed on every path that peaked: failure came "
                            "exactly where W2 vanished along the path" if ok else
-                           "not on every path (see the table)") for n, ok in exact.items())
+                           "not on every path (see the table)")
+        + (f", E_c grew {min(growth(n)):.3g}" + (f"-{max(growth(n)):.3g}" if len(growth(n)) > 1
+                                                   else "") + " times past the peak"
+           if growth(n) else "") for n, ok in exact.items())
          + f"; {und} run(s) undecided.")
     L.append(s)
     hm = c["parts"].get("hmodel")
@@ -232,6 +299,7 @@ def burst_report_lines(c: dict, fig: str | None) -> list:
                            and a["peaked"])
                + f"); below {d['outcomes'].get('below', '-')}, past {d['outcomes'].get('past', '-')}"
                if d["peaked"] else "c does not peak within the path")
-            for d in dm["paths"]) + ". The DEM's below switch is at half of the rise (docs/burst.md: "
-            "under strain control at the test's rate c stands above what the sample holds).")
+            for d in dm["paths"]) + ". The DEM's peak is the one at rest (its staircase of "
+            "dead-load holds), under the strain-controlled path's by its rate overstress; its "
+            "below switch is at half of the rise at rest (docs/dem.md).")
     return L + [""]

@@ -43,7 +43,7 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     from dem.__main__ import main
     out = tmp_path / "burst"
     main(["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
-          "--threads", "1", "--path-strain", "0.004", "--max-steps", "30000"])
+          "--threads", "1", "--max-steps", "200000"])
     for name, cols in CONTRACT.items():
         header, rows = io.read_csv(out / name)
         assert set(cols) <= set(header), (name, set(cols) - set(header))
@@ -55,7 +55,8 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     _, hist = io.read_csv(out / "history.csv")
     _, path = io.read_csv(out / "paths.csv")
     peaked = runs[0]["eta_peak_c"] == runs[0]["eta_peak_c"]          # not nan
-    assert [r["switch"] for r in runs] == (["below", "past"] if peaked else ["below"])
+    assert peaked                     # the 300-disk path peaks: the staircase runs
+    assert [r["switch"] for r in runs] == ["below", "past"]
     for r in runs:
         assert r["ratio"] == -2.0 and r["start_fraction"] == 0.9 and r["dc"] == 100.0
         assert r["outcome"] in OUTCOMES
@@ -78,20 +79,29 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
                 "fig_burst_ledger.png"):
         assert (out / fig).stat().st_size > 10_000
     assert "burst: " in capsys.readouterr().out
-    # from rest: every switch's state relaxed at fixed strain (rest.csv: c at rest below the
-    # loaded c), held by a dead load, its kinetic energy at the switch the rest floor, Eq. 1
-    # closed in every hold
+    # from rest: the path's start and loaded peak relaxed at fixed strain (rest.csv: c at rest
+    # below the loaded c), the staircase of holds (stairs.csv), each switch held by a dead load
+    # from an equilibrium (its backbone kinetic energy at the switch within the rule's bound),
+    # Eq. 1 closed in every hold
     _, rest = io.read_csv(out / "rest.csv")
-    assert len(rest) >= 3 and all(x["outcome"] == "equilibrium" for x in rest)
+    assert [x["state"] for x in rest] == ["start", "peak"]
+    assert all(x["outcome"] == "equilibrium" and x["c_rest"] < x["c_loaded"] for x in rest)
+    _, st = io.read_csv(out / "stairs.csv")
+    assert st[0]["c_from"] == rest[0]["c_rest"] and st[0]["role"] == "stair"
     for r in runs:
-        assert r["hold"] == "dead_load" and r["wall_mass"] > 0
-        assert r["c_rest"] == r["c_switch"] and r["relax_outcome"] == "equilibrium"
+        assert r["hold"] == "dead_load" and r["wall_mass"] > 0 and r["holds"] == len(st)
         assert r["ke_switch"] <= s["options"]["ke_tol"] * 300
         assert r["eq1_residual"] <= 1e-8
-        assert any(x["c_rest"] == r["c_rest"] and x["c_loaded"] == r["c_loaded"] for x in rest)
-    # only the relaxed states of the switches are kept
-    assert sorted(p.name.split("_")[-1][:7] for p in (out / "rest").iterdir()) == \
-        ["relaxed"] * len(runs)
+        assert r["c_loaded"] > r["c_rest"]            # the loaded path's c at that strain
+        assert any(x["c_target"] == r["c_target"] and x["outcome"] == r["outcome"] for x in st)
+    if peaked:
+        past = next(r for r in runs if r["switch"] == "past")
+        assert past["outcome"] == "failure" and past["dc"] == 100.0
+        assert past["c_peak"] == past["c_switch"] and past["c_rest"] == past["c_switch"]
+        assert past["w2_int_end"] < 0 and past["ke_growth"] >= 1e3
+    # only the states the switches started from are kept
+    assert sorted(p.name for p in (out / "rest").iterdir()) == sorted(
+        f"R-2_f0.9_{r['switch']}.npz" for r in runs)
     return out
 
 
@@ -103,17 +113,37 @@ def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, 
     from dem.__main__ import main
     out = tmp_path / "burst"
     args = ["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
-            "--threads", "1", "--path-strain", "0.004", "--max-steps", "30000"]
-    main(args)
-    full = (out / "burst.csv").read_bytes()
-    lines = (out / "burst_runs.jsonl").read_text().splitlines()
-    keep = [x for x in lines if '"kind": "hold"' not in x]
-    (out / "burst_runs.jsonl").write_text("\n".join(keep) + "\n{\"kind\": \"ho")  # torn line
+            "--threads", "1", "--max-steps", "200000", "--max-holds", "5"]
+    import dem.burst as b
+    real = b.hold
+    calls = {"n": 0}
+
+    def flaky(*a, **k):               # interrupted in the staircase's fourth hold
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    b.hold = flaky
+    try:
+        with pytest.raises(SystemExit) as e:         # the CLI's Ctrl-C: one line, exit 130
+            main(args)
+        assert e.value.code == 130
+    finally:
+        b.hold = real
+    assert (out / "burst_runs.jsonl").exists()
+    journal = out / "rest" / "R-2_f0.9.jsonl"
+    with open(journal, "a") as fh:
+        fh.write('{"kind": "ho')                              # a torn last line
     capsys.readouterr()
     main(args + ["--resume"])
     err = capsys.readouterr().err
-    assert "resumed from" in err and "0 holds finished" in err and "grid state" not in err
-    assert (out / "burst.csv").read_bytes() == full
+    assert "resumed from" in err and "1 paths finished" in err
+    assert "relaxed at fixed strain" not in err and "hold 0:" not in err and "hold 3:" in err
+    resumed = [(out / f).read_bytes() for f in ("stairs.csv", "rest.csv", "burst.csv")]
+    assert len(io.read_csv(out / "stairs.csv")[1]) == 5
+    main(args)                                                # the same, uninterrupted
+    assert [(out / f).read_bytes() for f in ("stairs.csv", "rest.csv", "burst.csv")] == resumed
     code, err = _run(args + ["--resume", "--dc", "200"], capsys)
     assert code == 2 and len(err) == 1 and "--resume" in err[0], err
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from typing import NamedTuple
 
 import numpy as np
@@ -146,11 +147,12 @@ def split_keys(keys, n_disks):
 
 class OwnWork(NamedTuple):
     """Each contact's own secant second-order work between two ContactStates, over the union of
-    their contacts (K,): keys (sorted), df and dl (K, 2) [N, m], w2 = df . dl (K,) [J], present
-    (K,) whether the contact exists now, existed (K,) at 0."""
+    their contacts (K,): keys (sorted), df and dl (K, 2) [N, m], l0 (K, 2) the branch at 0 [m],
+    w2 = df . dl (K,) [J], present (K,) whether the contact exists now, existed (K,) at 0."""
     keys: np.ndarray
     df: np.ndarray
     dl: np.ndarray
+    l0: np.ndarray
     w2: np.ndarray
     present: np.ndarray
     existed: np.ndarray
@@ -161,19 +163,39 @@ def own_work(s0: ContactState, s: ContactState) -> OwnWork:
     the branches from the positions of each instant, those of absent contacts included): the
     terms of the paper's Eq. 15 (secant), as ``dem.burst.contact_work`` sums them."""
     from .burst import _branches      # here: dem.burst may import this module
-    keys = np.union1d(s0.keys, s.keys)
+    if len(s0.x) != len(s.x):
+        raise ValueError(f"contact states of {len(s0.x)} and {len(s.x)} disks; allowed: the "
+                         "states of one sample")
+    keys = np.concatenate([s0.keys, s.keys])
+    keys.sort()
+    keys = keys[np.concatenate([[True], keys[1:] != keys[:-1]])]   # np.union1d, 5x faster here
     a0, a1 = np.searchsorted(keys, s0.keys), np.searchsorted(keys, s.keys)
+    present = np.zeros(len(keys), bool)
+    existed = np.zeros(len(keys), bool)
+    present[a1] = True
+    existed[a0] = True
     f0 = np.zeros((len(keys), 2))
     f1 = np.zeros((len(keys), 2))
     f0[a0] = s0.force
     f1[a1] = s.force
     df = f1 - f0
-    dl = _branches(keys, s.x, s.walls) - _branches(keys, s0.x, s0.walls)
-    present = np.zeros(len(keys), bool)
-    existed = np.zeros(len(keys), bool)
-    present[a1] = True
-    existed[a0] = True
-    return OwnWork(keys, df, dl, np.sum(df * dl, axis=1), present, existed)
+
+    def branches(st, at, there):
+        # a state's own branches where the contact exists, the positions' elsewhere (the same
+        # numbers: x_j - x_i, wall - x_p)
+        out = np.empty((len(keys), 2))
+        out[at] = st.branch
+        out[~there] = _branches(keys[~there], st.x, st.walls)
+        return out
+
+    l0 = branches(s0, a0, existed)
+    dl = branches(s, a1, present) - l0
+    return OwnWork(keys, df, dl, l0, _dot(df, dl), present, existed)
+
+
+def _dot(a, b):
+    """Row-wise dot product of (K, 2) arrays (np.sum(a * b, 1), 3x faster)."""
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
 
 
 def unstable_clusters(keys, unstable, n_disks):
@@ -240,13 +262,12 @@ def anatomy(s0: ContactState, s: ContactState, n_disks) -> dict:
                          f"({len(s0.x)}, {len(s.x)})")
     ow = own_work(s0, s)
     _, _, grain = split_keys(ow.keys, n_disks)
-    from .burst import _branches
-    l0 = _branches(ow.keys[grain], s0.x, s0.walls)
+    l0 = ow.l0[grain]
     n0 = l0 / np.hypot(l0[:, 0], l0[:, 1])[:, None]
     t0 = np.column_stack([-n0[:, 1], n0[:, 0]])
     dfg, dlg = ow.df[grain], ow.dl[grain]
-    w2n = float(np.sum(np.sum(dfg * n0, 1) * np.sum(dlg * n0, 1)))
-    w2t = float(np.sum(np.sum(dfg * t0, 1) * np.sum(dlg * t0, 1)))
+    w2n = float(np.sum(_dot(dfg, n0) * _dot(dlg, n0)))
+    w2t = float(np.sum(_dot(dfg, t0) * _dot(dlg, t0)))
     w2w = float(np.sum(ow.w2[~grain]))
     unstable = ow.w2 < 0.0
     _, sizes = unstable_clusters(ow.keys, unstable, n_disks)
@@ -311,6 +332,8 @@ def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState):
     import meshio
 
     from .io import _atomic_meshio
+    if not re.fullmatch(r"[A-Za-z0-9_.+-]+", str(tag)):
+        raise ValueError(f"tag={tag!r}; allowed: letters, digits and _ . + - (a file name part)")
     n = sim.n
     s = contact_state(sim)
     ow = own_work(s0, s)
@@ -342,17 +365,19 @@ def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState):
     return paths
 
 
-def coarse_fluctuation(sim, s: ContactState, per_cell=9):
+def coarse_fluctuation(sim, s: ContactState, per_cell=9, max_cells=24):
     """The velocity fluctuation (``velocity_fluctuation``) of the backbone disks (two contacts or
     more in ``s``), mass-weighted mean over the cells of a grid of about ``per_cell`` disks
-    each: (cx, cy, mean) with the cell centres (ny, nx) [m] and the means (ny, nx, 2) [m/s] (0
-    in a cell without backbone disks).  Per disk, the fluctuation of a dense sample is a
-    noise of neighbours moving against each other; the cell means show the pattern."""
+    each, at most ``max_cells`` along the box's longer side: (cx, cy, mean) with the cell
+    centres (ny, nx) [m] and the means (ny, nx, 2) [m/s] (0 in a cell without backbone disks).
+    Per disk, the fluctuation of a dense sample is a noise of neighbours moving against each
+    other; the cell means show the pattern."""
     n = sim.n
     wl = sim.walls
     w, h = wl[1] - wl[0], wl[3] - wl[2]
-    nx = max(1, int(round(math.sqrt(n / per_cell * w / h))))
-    ny = max(1, int(round(n / per_cell / nx)))
+    side = min(math.sqrt(n / per_cell), max_cells * min(w, h) / max(w, h))
+    nx = max(1, int(round(side * math.sqrt(w / h))))
+    ny = max(1, int(round(side * math.sqrt(h / w))))
     ix = np.clip(((sim.x[:, 0] - wl[0]) / w * nx).astype(np.int64), 0, nx - 1)
     iy = np.clip(((sim.x[:, 1] - wl[2]) / h * ny).astype(np.int64), 0, ny - 1)
     m = np.where(contact_counts(s, n) >= 2, sim.m, 0.0)
@@ -396,22 +421,25 @@ def plot_anatomy(path, panels, dpi=150):
         i, j, grain = split_keys(ow.keys, n)
         seg = np.stack([sim.x[i[grain]], sim.x[j[grain]]], axis=1)
         neg, lab = ow.w2[grain] < 0.0, label[grain]
+        # thinner lines for larger samples: 2000 disks and fewer as drawn here, 12,000 at 0.45
+        lw = max(0.45, min(1.0, math.sqrt(2000 / n)))
         ax.add_collection(EllipseCollection(2 * sim.r, 2 * sim.r, 0.0, units="xy",
                                             offsets=sim.x, offset_transform=ax.transData,
                                             facecolors="0.93", edgecolors="0.75",
-                                            linewidths=0.2))
-        ax.add_collection(LineCollection(seg[~neg], colors="0.55", linewidths=0.35))
-        ax.add_collection(LineCollection(seg[neg & (lab != 0)], colors="C3", linewidths=1.1))
-        ax.add_collection(LineCollection(seg[lab == 0], colors="navy", linewidths=2.0))
+                                            linewidths=0.2 * lw))
+        ax.add_collection(LineCollection(seg[~neg], colors="0.55", linewidths=0.35 * lw))
+        ax.add_collection(LineCollection(seg[neg & (lab != 0)], colors="C3", linewidths=1.1 * lw))
+        ax.add_collection(LineCollection(seg[lab == 0], colors="navy", linewidths=max(1.5, 2.0 * lw)))
         wl = sim.walls
         ax.plot([wl[0], wl[1], wl[1], wl[0], wl[0]], [wl[2], wl[2], wl[3], wl[3], wl[2]],
                 "k-", lw=1.5)
         cx, cy, mv = coarse_fluctuation(sim, s)
-        ref = float(np.hypot(mv[:, :, 0], mv[:, :, 1]).max()) if mv.size else 0.0
+        ref = float(np.quantile(np.hypot(mv[:, :, 0], mv[:, :, 1]), 0.9))
         if ref > 0:
-            # the largest cell mean is drawn one cell long
+            # the 90th percentile of the cell means is drawn 0.9 cell long
+            cell = (wl[1] - wl[0]) / cx.shape[1]
             q = ax.quiver(cx, cy, mv[:, :, 0], mv[:, :, 1], angles="xy", scale_units="xy",
-                          scale=ref / (cx[0, 1] - cx[0, 0]), width=0.004, color="k",
+                          scale=ref / (0.9 * cell), width=0.003, color="k",
                           zorder=4)
             key = float(f"{ref:.1g}")
             ax.quiverkey(q, 0.45, -0.025, key, f"{key:g} m/s",

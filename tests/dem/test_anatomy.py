@@ -47,7 +47,7 @@ def _state(n, x, forces, sliding=(), walls=BOX):
                         np.zeros(len(keys), bool), x, np.asarray(walls, float))
 
 
-def _pair(n, x0, x1, signs, scale=5.0, walls=BOX):
+def _pair(n, x0, x1, signs, scale=5.0, walls=BOX, sliding=()):
     """States at 0 and now with the contacts of ``signs`` {contact: +1 / -1}: f(0) = -10 n(0)
     and f = f(0) + sign scale dl, so that each contact's own W2 is sign scale |dl|^2 (the
     expected values are returned)."""
@@ -58,7 +58,7 @@ def _pair(n, x0, x1, signs, scale=5.0, walls=BOX):
         f0[c] = -10.0 * l0 / np.linalg.norm(l0)
         f1[c] = f0[c] + sg * scale * (l1 - l0)
         w2[c] = sg * scale * float((l1 - l0) @ (l1 - l0))
-    return _state(n, x0, f0, walls=walls), _state(n, x1, f1, walls=walls), w2
+    return _state(n, x0, f0, walls=walls), _state(n, x1, f1, sliding, walls), w2
 
 
 def test_two_disks_known_answers():
@@ -168,8 +168,9 @@ def test_wall_contacts_count_as_unstable_but_not_in_clusters_and_make_the_backbo
     assert a["coordination"] == pytest.approx(2.0, rel=1e-15)
     assert (a["n_unstable"], a["n_clusters"], a["largest_cluster"]) == (2, 1, 2)
     tri[(3, "w", 0)] = -1
-    s0, s, w2 = _pair(4, x0, x1, tri, walls=walls)
+    s0, s, w2 = _pair(4, x0, x1, tri, walls=walls, sliding={(0, 2)})
     a = anatomy(s0, s, 4)
+    assert a["sliding_share"] == 0.25         # of the four grain contacts, not of all five
     # the wall contact: unstable, not a node of the clusters; disk 3 (one grain and one wall
     # contact) joins the backbone: N_b = 4, C_b = 4
     assert (a["n_unstable"], a["n_clusters"], a["largest_cluster"]) == (3, 1, 2)
@@ -183,6 +184,9 @@ def test_states_of_another_number_of_disks_are_refused():
     s0 = _state(2, [[0, 0], [2, 0]], {(0, 1): (-10, 0)})
     with pytest.raises(ValueError, match="n_disks"):
         anatomy(s0, s0, 3)
+    s3 = _state(3, [[0, 0], [2, 0], [4, 0]], {(0, 1): (-10, 0)})
+    with pytest.raises(ValueError, match="one sample"):
+        own_work(s0, s3)
 
 
 def _union_find(keys, unstable, n):
@@ -310,7 +314,7 @@ def _reference(sim0, sim, snap0, snap):
         cnt[p] += 1
     nb = int(np.sum(cnt >= 2))
     cb = sum(1 for i, j in c1 if cnt[i] >= 2 and cnt[j] >= 2)
-    return {"contacts_lost": len(set(c0) - set(c1)), "contacts_created": len(set(c1) - set(c0)),
+    return {"grain_now": len(c1), "contacts_lost": len(set(c0) - set(c1)), "contacts_created": len(set(c1) - set(c0)),
             "coordination": 2 * cb / nb, "n_unstable": len(bad) + n_wall_unstable,
             "n_clusters": len(clusters), "largest_cluster": max(map(len, clusters), default=0),
             "w2n_int": w2n, "w2t_int": w2t, "w2_int_secant": w2n + w2t + w2w}
@@ -333,6 +337,8 @@ def test_a_sheared_sample_against_contact_work_and_a_per_contact_reference(sampl
         for k in ("contacts_lost", "contacts_created", "n_unstable", "n_clusters", "largest_cluster"):
             assert a[k] == ref[k], k
         assert a["coordination"] == pytest.approx(ref["coordination"], rel=1e-15)
+        _, _, g = split_keys(s.keys, sim.n)
+        assert a["sliding_share"] == np.count_nonzero(s.sliding[g]) / ref["grain_now"]
         # sums of a few hundred terms of either sign: round-off relative to their magnitudes
         scale = np.abs(own_work(s0, s).w2).sum()
         for k in ("w2n_int", "w2t_int", "w2_int_secant"):
@@ -476,6 +482,10 @@ def test_the_vtu_files_read_back(sample300, tmp_path):
     label, sizes = unstable_clusters(ow.keys, ow.w2 < 0, sim.n)
     assert np.array_equal(cd["cluster"], label[grain])
     assert (cd["cluster"] == 0).sum() == sizes[0]
+    # a tag that is not a file name part is refused before anything is written
+    with pytest.raises(ValueError, match="tag="):
+        write_anatomy_vtk(tmp_path / "sub", "../x", sim, s0)
+    assert not (tmp_path / "sub").exists()
 
 
 def test_the_figure(sample300, tmp_path):

@@ -63,13 +63,16 @@ import numpy as np
 from hmodel.burst import check_ratio
 
 from . import kernels
+from .anatomy import ANATOMY_COLUMNS, contact_state
 from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS, Ledger
-from .settle import RULE_COLUMNS, SettleRule, settle, voigt_strain
+from .settle import HISTORY_COLUMNS as SETTLE_COLUMNS, RULE_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .threads import ThreadChooser
 from .walls import strain_rate, tied
 
 SWITCHES = ("below", "past")
+ONSET = 10.0          # the onset of a burst: the backbone's kinetic energy this many times its
+                      # floor (one check after the switch: ``hold``)
 HOLDS = ("dead_load", "servo")
 UNLOADED = 0.05        # a path whose mean wall stress falls below this of its start has unloaded
 
@@ -81,9 +84,12 @@ PATH_COLUMNS = ["ratio", "start_fraction", "step", "eps1", "eps2", "s1", "s2", "
                 "c", "unbalanced"] + PATH_LEDGER_COLUMNS
 # the ledger's columns (dem.ledger) but its "ke", which is the "ke" column already there
 HOLD_LEDGER_COLUMNS = [c for c in LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS if c != "ke"]
+# and the anatomy's (dem.anatomy) but its "w2_int_secant", which is the column of that name here
+HOLD_ANATOMY_COLUMNS = [c for c in ANATOMY_COLUMNS if c != "w2_int_secant"]
 HISTORY_COLUMNS = ["ratio", "start_fraction", "switch", "step", "t", "eps1", "eps2", "c",
                    "c_target", "stress_error", "ke", "ke_backbone", "unbalanced", "s1", "s2",
-                   "strain_ratio", "w2_ext_held", "w2_walls", "w2_int_secant"] + HOLD_LEDGER_COLUMNS
+                   "strain_ratio", "w2_ext_held", "w2_walls", "w2_int_secant"] + \
+    HOLD_LEDGER_COLUMNS + HOLD_ANATOMY_COLUMNS
 BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction_peak_c",
                  "eps1_peak_c", "c_start", "c_peak", "peak_confirmed_by", "switch",
                  "eta_switch", "eps1_switch", "c_switch", "dc", "c_target", "outcome",
@@ -361,34 +367,34 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
                 f"{res.c_rest / 1e3:.2f} kPa, {res.outcome} after {res.steps} steps")
         relaxed[name] = res
     holds = []
-    eq = [("start", relaxed["start"].c_rest, path.rows[path.grid[0][0], 1])]   # equilibria
+    eq = [("relaxed_start", relaxed["start"].c_rest, path.rows[path.grid[0][0], 1])]  # equilibria
 
     def held(role, key, c_from, target):
-        got = journal.hold(len(holds))
+        k = len(holds)
+        got = journal.hold(k)
         if got is None:
             got = hold(journal.state(key), ratio, target, opts, threads)
-            journal.add_hold(len(holds), role, c_from, target, got)
-            log(f"{role} hold {len(holds)}: c {c_from / 1e3:.3f} -> {target / 1e3:.3f} kPa: "
+            journal.keep(f"h{k}_end", got.end_state)       # the next start, or a figure's
+            journal.keep(f"h{k}_onset", got.onset_state)
+            journal.add_hold(k, role, c_from, target, got)
+            log(f"{role} hold {k}: c {c_from / 1e3:.3f} -> {target / 1e3:.3f} kPa: "
                 f"{got.outcome} after {got.steps} steps")
-        holds.append((role, c_from, target, got))
+        holds.append((role, c_from, target, got._replace(end_state=None, onset_state=None)))
         return got
 
-    journal.keep("start", relaxed["start"].state)
     if path.peak is None:                           # no loaded peak: below from the path's end
-        journal.keep("end", relaxed["peak"].state)
-        held("below", "end", relaxed["peak"].c_rest, relaxed["peak"].c_rest + dc)
+        held("below", "relaxed_peak", relaxed["peak"].c_rest, relaxed["peak"].c_rest + dc)
         return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds,
                            math.nan, math.nan, math.nan, {"below": 0}, "no loaded peak",
                            time.time() - t0)
     c_s = relaxed["start"].c_rest
-    key = "start"
+    key = "relaxed_start"
     step = max((path.rows[path.peak, 8] - c_s) / opts.stairs, dc)
     end = ""
     while len(holds) < opts.max_holds:
         h = held("stair", key, c_s, c_s + step)
         if h.outcome == "equilibrium":
-            key = f"eq{len(holds) - 1}"
-            journal.keep(key, h.end_state)
+            key = f"h{len(holds) - 1}_end"
             c_s = h.history[-1, 4]
             eq.append((key, c_s, h.history[-1, 2]))
             continue
@@ -413,8 +419,7 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
         hp = holds[switches["past"]][3].history
         eta_peak = (hp[0, 10] - hp[0, 11]) / (0.5 * (hp[0, 10] + hp[0, 11]))
     log(f"rest search: {end}; c peak at rest {c_peak / 1e3:.3f} kPa, {len(holds)} holds")
-    return StairResult({k: v._replace(state=None) for k, v in relaxed.items()},
-                       [(r, a, b, h._replace(end_state=None)) for r, a, b, h in holds], c_peak,
+    return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds, c_peak,
                        e_peak, eta_peak, switches, end, time.time() - t0)
 
 
@@ -470,14 +475,15 @@ class _Journal:
             if r["kind"] == "hold" and r["k"] == k:
                 return HoldResult(r["outcome"], r["steps"], np.asarray(r["history"], float),
                                   r["creep_rate"], r["wall_time"], r["hold"], r["ke_switch"],
-                                  r["g_held"], r["wall_mass"], None)
+                                  r["g_held"], r["wall_mass"], None, None, r["onset_step"])
         return None
 
     def add_hold(self, k, role, c_from, target, h):
         self._add({"kind": "hold", "k": k, "role": role, "c_from": c_from, "c_target": target,
                    "outcome": h.outcome, "steps": h.steps, "history": h.history.tolist(),
                    "creep_rate": h.creep_rate, "wall_time": h.wall_time, "hold": h.hold,
-                   "ke_switch": h.ke_switch, "g_held": h.g_held, "wall_mass": h.wall_mass})
+                   "ke_switch": h.ke_switch, "g_held": h.g_held, "wall_mass": h.wall_mass,
+                   "onset_step": h.onset_step})
 
     def keep(self, key, state):
         if state is None:
@@ -492,6 +498,9 @@ class _Journal:
             return self.mem[key]
         from .io import load_state
         return load_state(f"{self.base}_{key}.npz")[0]
+
+    def has(self, key):
+        return key in self.mem or bool(self.base) and os.path.exists(f"{self.base}_{key}.npz")
 
     def files(self):
         """The journal and its state files."""
@@ -516,6 +525,9 @@ class HoldResult(NamedTuple):
     g_held: float = math.nan  # the held generalized force [N] (dead load)
     wall_mass: float = math.nan   # the walls' generalized mass m_G [kg] (dead load)
     end_state: State | None = None    # the state at the end
+    onset_state: State | None = None  # the state at the onset of a burst (backbone E_c 10 x its
+                                      # floor, ``ONSET``), None if it never came
+    onset_step: int = -1              # its step since the switch
 
 
 class ContactTable(NamedTuple):
@@ -611,7 +623,7 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
     snap0 = sim.snapshot()
     s2, s1 = sim.wall_stress(snap0)
     c_switch = s1 + ratio * s2
-    c0 = contact_table(sim)
+    a0 = contact_state(sim)
     g0, walls0 = np.bincount(snap0.ww, weights=snap0.wf, minlength=4), sim.walls.copy()
     step0, eps1_0 = sim.step, sim.strain()[1]
     t = sim.params.thickness
@@ -634,24 +646,33 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
             return abs(sy + ratio * sx - c_target)
     Ledger(sim)
     hist = []
-    led = [len(RULE_COLUMNS) + k for k, c in enumerate(LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS)
-           if c != "ke"]      # settle's row: the rule's columns, then the ledger's
+    onset = []
+    # settle's row: the rule's columns, the ledger's, the anatomy's; this history has its own
+    # "ke" and takes the anatomy's secant W2_int in its "w2_int_secant"
+    col = {c: k for k, c in enumerate(SETTLE_COLUMNS)}
+    extra = [col[c] for c in HOLD_LEDGER_COLUMNS + HOLD_ANATOMY_COLUMNS]
 
     def check(steps, row):
         step, ke, keb, ub, e1, e2, s1_, s2_, err, ratio_ = row[:len(RULE_COLUMNS)]
         hist.append([step - step0, (step - step0) * sim.dt, e1, e2, s1_ + ratio * s2_, c_target,
                      err, ke, keb, ub, s1_, s2_, ratio_, d_g * h0 * (e1 - eps1_0),
-                     wall_work(sim, g0, walls0), contact_work(c0, contact_table(sim))]
-                    + [row[k] for k in led])
+                     wall_work(sim, g0, walls0), row[col["w2_int_secant"]]]
+                    + [row[k] for k in extra])
+        # the onset of a burst: the backbone's kinetic energy 10 times its floor, the level the
+        # held step's first response leaves one check after the switch (from rest, that step
+        # alone raises it 1e2-1e5 times, below as past, and decays below)
+        if len(hist) > 2 and not onset and keb >= ONSET * max(hist[1][8], 1e-300):
+            onset.append((step - step0, sim.state()))
         if progress:
             progress(steps, hist[-1])
 
     res = settle(sim, None, opts.rule(), strain_scale=voigt_strain(sim, opts.strain_norm),
-                 progress=check, stress_error=error)
+                 progress=check, stress_error=error, contacts0=a0)
     sim.ledger.detach()
     # E_c at the switch: the backbone's (disks with two contacts or more), as ke_growth's
     return HoldResult(res.outcome, res.steps, np.asarray(hist, float), res.creep_rate,
-                      time.time() - t0, opts.hold, hist[0][8], g_held, m_g, sim.state())
+                      time.time() - t0, opts.hold, hist[0][8], g_held, m_g, sim.state(),
+                      onset[0][1] if onset else None, onset[0][0] if onset else -1)
 
 
 def ke_growth(keb) -> float:
@@ -855,19 +876,39 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     write_burst_files(out_dir, combos, paths, stairs, rows, summary)
     # the states the switches started from stay (rest/R.._f.._switch.npz); the rest served the
     # search and a resume
+    from .anatomy import plot_anatomy, write_anatomy_vtk
     from .io import save_state
+    panels = []
     for r, f, _ in combos:
         j = _Journal(os.path.join(out_dir, "rest", _base(r, f)), resume=True)
         keep = {}
         if (r, f) in stairs:
             res = stairs[(r, f)]
             keep = {sw: j.state(_switch_key(res, i)) for sw, i in res.switches.items()}
+            # the anatomy at the onset of a burst (if it came) and at the end of every switch's
+            # run: VTU for ParaView, and the first path's figure, below beside past
+            for sw in SWITCHES:
+                if sw not in res.switches:
+                    continue
+                i = res.switches[sw]
+                s0 = contact_state(Simulation(keep[sw]))
+                for when in ("onset", "end"):
+                    if j.has(f"h{i}_{when}"):
+                        sim = Simulation(j.state(f"h{i}_{when}"))
+                        write_anatomy_vtk(os.path.join(out_dir, "anatomy"),
+                                          f"{_base(r, f)}_{sw}_{when}", sim, s0)
+                        if (r, f) == (combos[0][0], combos[0][1]):
+                            t = (sim.step - keep[sw].step) * sim.dt
+                            panels.append((f"{sw}: {res.holds[i][3].outcome}, at the {when} "
+                                           f"(t = {t:.3g} s)", sim, s0))
         for path in j.files() + [os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz")
                                  for i in range(2)]:
             if os.path.exists(path):
                 os.unlink(path)
         for sw, st in keep.items():
             save_state(os.path.join(out_dir, "rest", f"{_base(r, f)}_{sw}.npz"), st)
+    if panels:
+        plot_anatomy(os.path.join(out_dir, "fig_burst_anatomy.png"), panels)
     return rows, summary
 
 
@@ -876,16 +917,16 @@ def _base(ratio, fraction):
 
 
 def _switch_key(res: StairResult, i):
-    """The journal's key of the state hold ``i`` of a staircase started from: the start, or the
-    end of the last equilibrium hold before it (for the below run: the equilibrium it was
-    chosen from)."""
+    """The journal's key of the state hold ``i`` of a staircase started from: the relaxed start,
+    the relaxed end of a path without a peak, or the end of the last equilibrium hold before it
+    (for the below run: the equilibrium it was chosen from)."""
     role, c_from, _, _ = res.holds[i]
     if res.end == "no loaded peak":
-        return "end"
-    keys = ["start"] + [f"eq{k}" for k, (ro, _, _, h) in enumerate(res.holds)
-                        if ro == "stair" and h.outcome == "equilibrium"]
-    cs = [res.relaxed["start"].c_rest] + [h.history[-1, 4] for ro, _, _, h in res.holds
-                                           if ro == "stair" and h.outcome == "equilibrium"]
+        return "relaxed_peak"
+    eq = [(f"h{k}_end", h.history[-1, 4]) for k, (ro, _, _, h) in enumerate(res.holds)
+          if ro == "stair" and h.outcome == "equilibrium" and k < i]
+    keys = ["relaxed_start"] + [k for k, _ in eq]
+    cs = [res.relaxed["start"].c_rest] + [c for _, c in eq]
     return keys[int(np.argmin(np.abs(np.asarray(cs) - c_from)))]
 
 

@@ -181,6 +181,8 @@ def run_probe(state: State, alpha_deg: float, sliding: bool, opts: ProbeOptions 
     sim.cap_on = bool(sliding)
     if ledger:
         Ledger(sim)
+    from .anatomy import contact_state
+    contacts0 = contact_state(sim)      # the anatomy's t = 0 (dem.anatomy)
     snap0, s0, len0 = _axes(sim)
     x0 = sim.x.copy()
     walls0 = sim.walls.copy()
@@ -199,7 +201,7 @@ def run_probe(state: State, alpha_deg: float, sliding: bool, opts: ProbeOptions 
                                 opts.ramp_steps))
     sim.run(opts.ramp_steps)
     st = settle(sim, (target[1], target[0]), opts.rule(), eps0=eps0, de_elastic=de_elastic,
-                strain_scale=scale)
+                strain_scale=scale, contacts0=contacts0)
     snap1, s1, len1 = _axes(sim)
     dsig = s1 - s0
     deps = (len0 - len1) / len0

@@ -38,13 +38,15 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .anatomy import ANATOMY_COLUMNS
 from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS
 
 # a check's row: the rule's columns, then the energy ledger's (dem.ledger; NaN when the run has
-# no ledger attached)
+# no ledger attached), then the anatomy of its contacts since the start (dem.anatomy; NaN when
+# settle is not given the contacts at the start)
 RULE_COLUMNS = ["step", "kinetic_energy", "kinetic_energy_backbone", "unbalanced",
                 "eps1", "eps2", "s1", "s2", "stress_error", "strain_ratio"]
-HISTORY_COLUMNS = RULE_COLUMNS + LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS
+HISTORY_COLUMNS = RULE_COLUMNS + LEDGER_COLUMNS + LEDGER_EXTRA_COLUMNS + ANATOMY_COLUMNS
 OUTCOMES = ("equilibrium", "failure", "undecided")
 
 
@@ -123,7 +125,7 @@ def voigt_strain(sim, norm: float) -> float:
 
 
 def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_scale=None,
-           progress=None, stress_error=None) -> Settled:
+           progress=None, stress_error=None, contacts0=None) -> Settled:
     """Run ``sim`` (its control already set) until equilibrium, failure or ``rule.max_steps``
     (see the module docstring).  ``target_xy``: wall-stress targets (s_xx, s_yy) [Pa];
     ``eps0``: wall strains (eps1, eps2) at the start of the probe (default: now);
@@ -132,7 +134,9 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
     and of the strain ratio when ``de_elastic`` is not given.  ``progress(steps, row)``:
     called after each check.  ``stress_error(s_xx, s_yy)``: the stress error [Pa] of a control
     that holds something else than the two wall stresses (``dem.burst``: |c - c_target|; then
-    ``target_xy`` is not used); default max |(s_xx, s_yy) - target_xy|."""
+    ``target_xy`` is not used); default max |(s_xx, s_yy) - target_xy|.  ``contacts0``: the
+    contacts at the start (``dem.anatomy.contact_state``), for the anatomy columns of every
+    check."""
     target = None if stress_error else np.asarray(target_xy, float)
     e = lambda: sim.strain()[::-1]                      # (eps1, eps2) = (y, x)
     eps0 = e() if eps0 is None else np.asarray(eps0, float)
@@ -149,7 +153,8 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
                float(np.max(np.abs(np.array([sx, sy]) - target))))
         ratio = float(np.linalg.norm(de) / el) if el else math.nan
         hist.append([sim.step, sim.kinetic_energy(), backbone_kinetic_energy(sim, snap), ub,
-                     de[0] + eps0[0], de[1] + eps0[1], sy, sx, err, ratio] + ledger_row(sim))
+                     de[0] + eps0[0], de[1] + eps0[1], sy, sx, err, ratio] + ledger_row(sim)
+                    + anatomy_row(sim, contacts0))
         if progress:
             progress(steps, hist[-1])
         outcome = _decide(np.asarray(hist[-(w_checks + 1):]), de, ratio, rule, sim.n,
@@ -174,6 +179,16 @@ def ledger_row(sim) -> list:
     if sim.ledger is None:
         return [math.nan] * (len(LEDGER_COLUMNS) + len(LEDGER_EXTRA_COLUMNS))
     return sim.ledger.read().row()
+
+
+def anatomy_row(sim, contacts0) -> list:
+    """The anatomy columns (``ANATOMY_COLUMNS``) of ``sim`` now against the contacts at the start
+    ``contacts0``, or NaN without them."""
+    if contacts0 is None:
+        return [math.nan] * len(ANATOMY_COLUMNS)
+    from .anatomy import anatomy, contact_state
+    a = anatomy(contacts0, contact_state(sim), sim.n)
+    return [a[c] for c in ANATOMY_COLUMNS]
 
 
 def _decide(win, de, ratio, rule, n, w_checks, strain_scale):

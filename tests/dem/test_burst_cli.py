@@ -139,7 +139,7 @@ def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, 
     main(args + ["--resume"])
     err = capsys.readouterr().err
     assert "resumed from" in err and "1 paths finished" in err
-    assert "relaxed at fixed strain" not in err and "hold 0:" not in err and "hold 3:" in err
+    assert "state relaxed at fixed strain" not in err and "hold 0:" not in err and "hold 3:" in err
     resumed = [(out / f).read_bytes() for f in ("stairs.csv", "rest.csv", "burst.csv")]
     assert len(io.read_csv(out / "stairs.csv")[1]) == 5
     main(args)                                                # the same, uninterrupted

@@ -226,24 +226,24 @@ def _control_block(K, free) -> tuple:
     return sign, float(lam), math.nan
 
 
-def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, direction=None,
-                rtol: float = 1e-10, max_iter: int = 25, n_points: int = 32,
-                reach: float = 4.0) -> StaticVerdict:
+def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, last=None,
+                rtol: float = 1e-10, max_iter: int = 25, max_points: int = 400) -> StaticVerdict:
     """Is there a static state beyond the committed one (displacement ``u_n``, platen
     ``delta_n``) when the step to ``delta_n + h`` fails however it is cut? A one-parameter scan
     of the controlled variable (the platen displacement delta) along the equilibrium path
     (Riks's arc-length): unknowns y = (u_free, delta), equations r_free(u) = 0 and
-    d.(y - y_n) = t, d the unit ``direction`` (the last converged increment (du_free, d delta);
-    default: delta alone), t over ``n_points`` points up to ``reach`` h / d_delta, each point
-    Newton on the bordered system [[K_ff, K_fp g], [d_u, d_delta]], g = d u_prescribed / d delta
-    (halving its t step, down to 1/1024, where it fails). The material is the committed state's,
-    each point's trial from it (nothing committed).
+    d.(y - y_n) = t, d the unit vector of ``last`` (the last converged increment (du (ndofs,),
+    d delta); default: delta alone), each point Newton on the bordered system
+    [[K_ff, K_fp g], [d_u, d_delta]], g = d u_prescribed / d delta. Steps of t: a quarter of
+    ``last``'s length (at most an eighth of the step h along d), halved where Newton fails (down
+    to 1/1024), doubled after a success; at most ``max_points``. The material is the committed
+    state's, each point's trial from it (nothing committed).
 
-    'exists' once delta passes delta_n + h (the result: the furthest converged point not past it,
-    or the first past it); 'uncontrollable' when delta turns back before (a limit point of the
-    displacement-controlled problem: det K_ff changes sign there, W2 = 0 for this control), or
-    when the path stops with det K_ff changing sign over its last interval; 'discontinuous' when
-    it turns back with det K_ff keeping its sign; else 'unresolved'."""
+    'exists' once delta reaches delta_n + h (the result: the furthest converged point not past
+    it, or the first past it); 'uncontrollable' where delta turns back first (a limit point of
+    the displacement-controlled problem: det K_ff changes sign there, W2 = 0 for this control),
+    or where the path stops with det K_ff changing sign over its last interval; 'discontinuous'
+    where delta turns back with det K_ff keeping its sign; else 'unresolved'."""
     mat = prob.material
     free, presc = prob.free, prob.prescribed
     f_ref = prob.sigma2 * prob.height
@@ -252,15 +252,18 @@ def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, direction=None,
     eps_n = prob.strain(u_n)
     nf = free.size
     d = np.zeros(nf + 1)
-    if direction is not None:
-        d[:nf], d[nf] = np.asarray(direction[0])[free], float(direction[1])
+    if last is not None:
+        d[:nf], d[nf] = np.asarray(last[0])[free], float(last[1])
     if not d[nf] > 0:
         d[:] = 0.0
         d[nf] = 1.0
+    length = float(np.linalg.norm(d)) if last is not None else math.inf
     d /= np.linalg.norm(d)
     y_n = np.append(u_n[free], delta_n)
-    t_unit = h / d[nf]
     target = delta_n + h
+    dt_max = h / d[nf] / 8.0
+    dt = min(dt_max, length / 4.0)
+    dt_min = dt / 1024.0
 
     def state(y):
         u = u_n.copy()
@@ -297,9 +300,8 @@ def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, direction=None,
         return None
 
     pts = [(0.0, y_n, u_n, None, None, 0.0)]          # (t, y, u, f, trial, residual)
-    dt = reach * t_unit / n_points
     t, tang = 0.0, d.copy()
-    while t < reach * t_unit and dt >= reach * t_unit / n_points / 1024:
+    while len(pts) <= max_points and dt >= dt_min:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", spla.MatrixRankWarning)
             got = solve_at(t + dt, pts[-1][1] + dt * tang)
@@ -307,14 +309,13 @@ def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, direction=None,
             dt *= 0.5
             continue
         y, u, f, trial, rn = got
-        if len(pts) > 1:
-            tang = (y - pts[-1][1]) / dt
+        tang = (y - pts[-1][1]) / dt
         t += dt
         pts.append((t, y, u, f, trial, rn))
-        if y[nf] >= target:
-            break
+        if y[nf] >= target or y[nf] < pts[-2][1][nf]:
+            break                          # reached the step's end, or delta turned back
+        dt = min(2.0 * dt, dt_max)
     deltas = np.array([p[1][nf] for p in pts])
-    k_max = int(np.argmax(deltas))
 
     def block(k):
         trial = pts[k][4] if k > 0 else mat.trial(np.zeros_like(eps_n))
@@ -332,14 +333,16 @@ def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, direction=None,
         res = StepResult(u, f, trial, [rn], [0])
         return StaticVerdict("exists", delta_n, target, float(deltas.max()), (0, 0), nan2, nan2,
                              len(pts) - 1, (res, float(y[nf])))
-    if 0 < k_max < len(pts) - 1:
-        # delta turns back along the path: a limit point when det K_ff changes sign there
-        a, b = block(k_max), block(k_max + 1)
+    k = len(pts) - 1
+    if k >= 1 and deltas[k] < deltas[k - 1]:
+        # delta turns back along the path, between points k - 2 (still rising) and k: a limit
+        # point when det K_ff changes sign there
+        a, b = block(max(k - 2, 0)), block(k)
         return verdict("uncontrollable" if a[0] != b[0] else "discontinuous", a, b)
     # the path could not be followed further: a limit point within its last interval if det K_ff
     # changed sign there; else nothing is proven (a jump of the material's response, or only
     # Newton's difficulty: the FE can find other states, unlike one material point)
-    a, b = block(max(len(pts) - 2, 0)), block(len(pts) - 1)
+    a, b = block(max(k - 1, 0)), block(k)
     return verdict("uncontrollable" if a[0] != b[0] else "unresolved", a, b)
 
 
@@ -428,8 +431,8 @@ class LoadStepper:
     def _decide(self, h, cut, err):
         """The step to delta + h failed at the floor of its cut-backs: ``static_scan``."""
         H = self.prob.height
-        direction = None if self._du_last is None else (self._du_last / self._h_last, 1.0)
-        v = static_scan(self.prob, self.u, self.delta, h, direction, self.rtol, self.max_iter)
+        last = None if self._du_last is None else (self._du_last, self._h_last)
+        v = static_scan(self.prob, self.u, self.delta, h, last, self.rtol, self.max_iter)
         if self.log:
             self.log(f"step {self.step + 1}: static scan beyond eps1 = {self.eps1:.6g} ({v.points} "
                      f"points): {v.line(H)}")

@@ -73,8 +73,12 @@ def biaxial_test(params: HParams, sigma2: float | None = None, d_eps1: float = 1
         raise ValueError(f"d_eps1 must be in (0, eps1_max = {eps1_max}], got {d_eps1!r}")
     p = params.replace(p0=sigma2)
     n = int(round(eps1_max / d_eps1))
-    return run_path(isotropic_state(p), p, drained_biaxial(d_eps1), n, progress=progress,
-                    label="drained biaxial")
+    try:
+        s0 = isotropic_state(p)
+    except BaseException as e:
+        e.partial = None          # the compression's rows are not the test's (interrupted there)
+        raise
+    return run_path(s0, p, drained_biaxial(d_eps1), n, progress=progress, label="drained biaxial")
 
 
 def state_at_eta(params: HParams, eta: float, sigma2: float | None = None, d_eps1: float = 1e-5,

@@ -451,13 +451,22 @@ def cmd_domain(args, stage):
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
     t0 = _start(args, stage, f"bifurcation domain at sigma2 = {', '.join(f'{s:g}' for s in pressures)} Pa")
-    pts = bifurcation_domain(P, pressures, workers=args.workers, d_eps1=args.d_eps1,
-                             n_dir_probe=args.n, progress=lambda m: _say(stage, m))
+    def write_rows(pts):
+        os.makedirs(args.out, exist_ok=True)
+        cols = {k: np.array([getattr(d, k) for d in pts]) for k in DOMAIN_COLUMNS}
+        write_csv(os.path.join(args.out, "domain.csv"), cols)
+        stage.wrote(f"domain.csv ({len(pts)} of {len(pressures)} pressures)" if len(pts) < len(pressures)
+                    else "domain.csv", record_params(args.out, P, f"python -m hmodel domain; {note}"))
+
+    try:
+        pts = bifurcation_domain(P, pressures, workers=args.workers, d_eps1=args.d_eps1,
+                                 n_dir_probe=args.n, progress=lambda m: _say(stage, m))
+    except BaseException as e:
+        if getattr(e, "partial", None):     # interrupted: the pressures finished stay
+            write_rows(e.partial)
+        raise
     t_run = time.time() - t0
-    os.makedirs(args.out, exist_ok=True)
-    cols = {k: np.array([getattr(d, k) for d in pts]) for k in DOMAIN_COLUMNS}
-    write_csv(os.path.join(args.out, "domain.csv"), cols)
-    stage.wrote("domain.csv", record_params(args.out, P, f"python -m hmodel domain; {note}"))
+    write_rows(pts)
     with atomic_open(os.path.join(args.out, "summary.json")) as f:
         json.dump(json_safe({"parameters": note, "paths": [
             {"sigma2": d.sigma2, "outcome": d.outcome, "end": d.end or None} for d in pts]}), f, indent=1)

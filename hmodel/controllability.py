@@ -69,8 +69,9 @@ class Verdict(NamedTuple):
         (x.W M'_ff x / (|x| |M' x|)), each as (before, after) the extremum or jump.
     bracket : the scan's |e'_k| bound; points : its number of points.
     hexagons : the orientations theta [deg] whose flags (open, sliding) differ across the jump or
-        the extremum, their N1 [N] and alpha [deg] on the side where they are closed, whether
-        they open.
+        the extremum, their N1, N2 [N] and alpha [deg] on the side where they are closed, whether
+        they open and by which contacts ('axial': N2 reaches 0, 'inclined': N1 does; the rule
+        drops the other force).
     residual : |s'_k - target| at the root (exists) [Pa].
     """
 
@@ -147,12 +148,18 @@ def verdict_text(v: Verdict, name: str) -> str:
                 f"{v.det[0]:.4g} to {v.det[1]:.4g}, W2 for this control from {v.w2[0]:+.3g} to "
                 f"{v.w2[1]:+.3g}")
     if v.outcome == "discontinuous":
-        hexa = v.hexagons.get("theta") or []
+        hx = v.hexagons
+        op = [i for i, o in enumerate(hx.get("opens", [])) if o]
+        what = ""
+        if op:
+            theta = ", ".join("%.0f" % hx["theta"][i] for i in op[:6])
+            via = "/".join(sorted({hx["via"][i] for i in op}))
+            n1, n2 = max(hx["N1"][i] for i in op), max(hx["N2"][i] for i in op)
+            what = (f" (hexagons at theta = {theta} deg open by their {via} contacts, dropping N1 "
+                    f"up to {n1:.3g} N and N2 up to {n2:.3g} N at once)")
         return (f"{name} jumps by {v.jump:.4g} Pa across the {v.target:.9g} asked, the determinant "
                 f"keeping its sign ({v.det[0]:.4g}, {v.det[1]:.4g}; W2 {v.w2[0]:+.3g}, "
-                f"{v.w2[1]:+.3g}): a discontinuity of the model's response"
-                + (f" (hexagons at theta = {', '.join(f'{t:.0f}' for t in hexa[:6])} deg change, "
-                   f"N1 up to {max(v.hexagons['N1']):.3g} N where closed)" if hexa else ""))
+                f"{v.w2[1]:+.3g}): a discontinuity of the model's response{what}")
     return f"{v.outcome}: {name} = {v.reached:.9g} Pa at d e' = {v.at:.6g} (target {v.target:.9g})"
 
 
@@ -254,13 +261,19 @@ def _hexagon_changes(state, params, de_a, de_b) -> dict:
     (3,) from ``state``: theta [deg], N1 [N] and alpha [deg] where each is closed, and whether
     it opens (rather than starts or stops sliding)."""
     out = update_copies(state, np.vstack([de_a, de_b]), params, extras=False)
-    sl, op, N1, al = out[10], out[11], out[3], out[2]
+    sl, op, N1, N2, al = out[10], out[11], out[3], out[5], out[2]
     diff = np.flatnonzero((sl[0] != sl[1]) | (op[0] != op[1]))
     closed = [0 if not op[0, i] else 1 for i in diff]
+    opens = [bool(op[0, i] != op[1, i]) for i in diff]
+    # by which contacts it opens: the one whose force is ~0 on the closed side (it reaches 0
+    # continuously; the opening rule drops the other one)
+    via = [("axial" if N2[c, i] < N1[c, i] else "inclined") if o else ""
+           for c, i, o in zip(closed, diff, opens)]
     return {"theta": [float(x) for x in np.degrees(params.theta)[diff]],
             "N1": [float(N1[c, i]) for c, i in zip(closed, diff)],
+            "N2": [float(N2[c, i]) for c, i in zip(closed, diff)],
             "alpha": [float(np.degrees(al[c, i])) for c, i in zip(closed, diff)],
-            "opens": [bool(op[0, i] != op[1, i]) for i in diff], "count": int(diff.size)}
+            "opens": opens, "via": via, "count": int(diff.size)}
 
 
 class _Scan:
@@ -365,7 +378,8 @@ def _analyse(sc: _Scan, t, g, tan, tol):
         # no stiffness left where s'_k comes closest (e.g. every hexagon open: no tension)
         return Verdict("uncontrollable", sc.k, sc.T, sc.T + float(g[j]), float(t[j]), 0.0,
                        (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), 0.0, 0,
-                       {"theta": [], "N1": [], "alpha": [], "opens": [], "count": 0}, math.nan)
+                       {"theta": [], "N1": [], "N2": [], "alpha": [], "opens": [], "via": [],
+                        "count": 0}, math.nan)
     if j == 0 or j == t.size - 1:
         return None
     # the extremum of s'_k: golden section on |g| between the neighbours of the closest point

@@ -19,7 +19,8 @@ from . import _kernels
 from .material import (HState, reference_state, to_voigt, kernel_args, _material_args,
                        increment_from_outputs, check_state)
 from .params import HParams
-from .controllability import PathEnd, control_scan, decide, describe_control, stress_name
+from .controllability import (PathEnd, Verdict, control_scan, decide, describe_control,
+                              stress_name)
 
 __all__ = [
     "MixedControl", "PathResult", "MixedControlError", "mixed_step", "run_path", "MAX_CUTS",
@@ -339,50 +340,26 @@ class _Cutter:
         return self.s0 + (k - 1 + f) * self.d_sig
 
     def step(self, state: HState, k: int, guess) -> _Cut:
-        params, control = self.params, self.control
-        general, A, Ainv = control.matrices()
+        """Step k (1-based) from ``state``, whose whole did not converge, in substeps; ``guess``
+        the previous step's strain increment (the substeps' guesses scale it)."""
         rate = np.asarray(guess, float)         # strain increment per unit fraction of the step
         sig = to_voigt(state.stress)[0]
         floor = 0.5 ** self.max_cuts
-        # the whole step failed (the caller's try): its halves, or, without cuts, the decision
-        frac, h, depth, its = (0.0, 0.5, 1, 0) if self.max_cuts > 0 else (0.0, 1.0, 0, 0)
-        de_sum = np.zeros(3)
+        h, depth = (0.5, 1) if self.max_cuts > 0 else (1.0, 0)     # (without cuts: decide at once)
+        frac, its, de_sum = 0.0, 0, np.zeros(3)
         while frac < 1.0:
             h = min(h, 1.0 - frac)
-            ctl = dataclasses.replace(control, d_eps=tuple(h * self.d_eps))
             tgt = self.target(k, frac + h)
-            try:
-                if depth == 0 and frac == 0.0:
-                    raise MixedControlError("the whole step failed")      # (no cuts allowed)
-                inc, de, it = mixed_step(state, params, ctl, tgt, guess=h * rate,
-                                         rtol=self.rtol, max_iter=self.max_iter, tol=self.tol)
-            except MixedControlError:
-                if h * 0.5 >= floor:
-                    h *= 0.5
-                    depth = max(depth, int(round(-np.log2(h))))
-                    continue
-                tol = self.tol if self.tol is not None else \
-                    self.rtol * max(float(np.max(np.abs(tgt))), 1e-3 * params.p0)
-                de_p = h * self.d_eps                # the controlled variables of the substep
-                v = decide(state, params, control, tgt, de_p, tol)
-                if v.outcome != "exists":
-                    if v.outcome == "unresolved":
-                        raise MixedControlError(
-                            f"step {k}: no static state found and none excluded: the controlled "
-                            f"stress comes closest to its target ({v.reached:.6g} of {v.target:.6g} "
-                            f"Pa) at the end of the largest bracket |d e'| <= {v.bracket:g}")
-                    return _Cut(state, sig, de_sum, its, depth, frac, v)
-                if v.residual > tol:
-                    raise MixedControlError(
-                        f"step {k}: a static state exists (the controlled stress reaches its target "
-                        f"continuously at d e'{v.variable + 1} = {v.at:.6g}) but not within the "
-                        f"tolerance: residual {v.residual:.3e} Pa > {tol:.3e} Pa")
-                # the scan's root: the static state of this substep
-                ep = np.asarray(de_p, float).copy()
-                ep[v.variable] = v.at
-                de = control_scan(state, params, control, ep, tgt, [v.at], v.variable)[2][0]
-                inc, de, it = mixed_step(state, params, MixedControl((True, True, True), tuple(de)),
-                                         tgt)
+            got = self._attempt(state, h, tgt, rate) if h < 1.0 else None
+            if got is None and h * 0.5 >= floor:
+                h *= 0.5
+                depth = max(depth, int(round(-np.log2(h))))
+                continue
+            if got is None:
+                got = self._decide(state, k, h, tgt)
+                if isinstance(got, Verdict):            # no static state: the path ends here
+                    return _Cut(state, sig, de_sum, its, depth, frac, got)
+            inc, de, it = got
             state = inc.state
             sig = to_voigt(inc.stress)[0]
             de_sum = de_sum + de
@@ -391,6 +368,42 @@ class _Cutter:
             frac += h
             h *= 2.0
         return _Cut(state, sig, de_sum, its, depth, 1.0, None)
+
+    def _attempt(self, state, h, tgt, rate):
+        """The substep of fraction h by Newton: (Increment, d_eps, iterations), or None."""
+        ctl = dataclasses.replace(self.control, d_eps=tuple(h * self.d_eps))
+        try:
+            return mixed_step(state, self.params, ctl, tgt, guess=h * rate, rtol=self.rtol,
+                              max_iter=self.max_iter, tol=self.tol)
+        except MixedControlError:
+            return None
+
+    def _decide(self, state, k, h, tgt):
+        """The substep of fraction h at the floor: ``controllability.decide``'s root as
+        (Increment, d_eps, iterations), or its Verdict when no static state exists; raises
+        MixedControlError when it can neither find nor exclude one."""
+        params, control = self.params, self.control
+        tol = self.tol if self.tol is not None else \
+            self.rtol * max(float(np.max(np.abs(tgt))), 1e-3 * params.p0)
+        de_p = h * self.d_eps                        # the controlled variables of the substep
+        v = decide(state, params, control, tgt, de_p, tol)
+        if v.outcome in ("uncontrollable", "discontinuous"):
+            return v
+        if v.outcome == "unresolved":
+            raise MixedControlError(
+                f"step {k}: no static state found and none excluded: the controlled stress comes "
+                f"closest to its target ({v.reached:.6g} of {v.target:.6g} Pa) at the end of the "
+                f"largest bracket |d e'| <= {v.bracket:g}")
+        if v.residual > tol:
+            raise MixedControlError(
+                f"step {k}: a static state exists (the controlled stress reaches its target "
+                f"continuously at d e'{v.variable + 1} = {v.at:.6g}) but not within the "
+                f"tolerance: residual {v.residual:.3e} Pa > {tol:.3e} Pa")
+        # the scan's root: the static state of this substep, every strain now known
+        ep = np.asarray(de_p, float).copy()
+        ep[v.variable] = v.at
+        de = control_scan(state, params, control, ep, tgt, [v.at], v.variable)[2][0]
+        return mixed_step(state, params, MixedControl((True, True, True), tuple(de)), tgt)
 
 
 def _state_from_work(state, work, sliding, sig) -> HState:

@@ -243,7 +243,8 @@ def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
                        progress=None, **kw) -> list[DomainPoint]:
     """``domain_point`` for every confining pressure, in parallel processes (``workers`` >= 1,
     default min(len, cpu count); 1 runs in this process). Results in the input order.
-    ``progress``: None or a callable taking one line of text, called as each pressure is done."""
+    ``progress``: None or a callable taking one line of text, called as each pressure is done.
+    Interrupted (or failed), the exception carries the pressures finished as ``.partial``."""
     sig = [float(s) for s in sigma2_list]
     for s in sig:
         _check_sigma2(s)
@@ -262,8 +263,12 @@ def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
                      f"{time.perf_counter() - t0:.1f} s)")
 
     if workers <= 1 or len(sig) == 1:
-        for k, j in enumerate(jobs):
-            done(k, _domain_job(j))
+        try:
+            for k, j in enumerate(jobs):
+                done(k, _domain_job(j))
+        except BaseException as e:
+            e.partial = [o for o in out if o is not None]     # the pressures finished, in order
+            raise
         return out
     # spawn, not fork: a fork after Numba's parallel kernel has started its threads can crash
     ex = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), initializer=_domain_worker_init,
@@ -272,10 +277,11 @@ def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
         futures = {ex.submit(_domain_job, j): k for k, j in enumerate(jobs)}
         for f in as_completed(futures):
             done(futures[f], f.result())
-    except BaseException:
+    except BaseException as e:
         # interrupted or failed: stop the workers now rather than after their current pressure
         for proc in list((getattr(ex, "_processes", None) or {}).values()):
             proc.terminate()
+        e.partial = [o for o in out if o is not None]
         raise
     finally:
         ex.shutdown(wait=True, cancel_futures=True)

@@ -160,3 +160,13 @@ def test_burst_hold_cuts_a_time_step_and_ends_a_failure_that_cannot_converge(mon
     calls.update(n=0, mode="always")
     r = hb.hold(st, P, -2.0, c0 + 20.0)
     assert r.outcome == "failure" and "did not converge" in r.failure and len(r.history["t"]) == 6
+
+
+def test_interrupted_domain_keeps_the_pressures_finished(tmp_path):
+    out = tmp_path / "d"
+    rc, err = interrupt_after(["hmodel", "domain", "--sigma2", "100e3,200e3,300e3,400e3,500e3,600e3",
+                               "--n-dir", "36", "--n", "36", "--d-eps1", "1e-6", "--workers", "1",
+                               "--out", str(out)], "domain: sigma2 = 100000 Pa done", sig=signal.SIGINT)
+    assert rc == 130 and "domain.csv (" in err[-1]
+    c = read_csv(out / "domain.csv")
+    assert 100e3 in list(c["sigma2"]) and len(c["sigma2"]) < 6

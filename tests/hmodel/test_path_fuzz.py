@@ -56,11 +56,14 @@ def check(kw: dict, name: str, r) -> str:
     elif end.outcome == "discontinuous":
         assert v.det[0] * v.det[1] > 0 and v.jump > 0, (kw, name, v)
         if name == "drained":
-            # the mechanism: a hexagon losing its axial contact with its inclined ones loaded,
-            # which needs alpha > 90 deg - phi_g (else they slide first)
-            op = [i for i, o in enumerate(v.hexagons["opens"]) if o]
-            assert op and all(v.hexagons["alpha"][i] > 90.0 - kw["phi_g"] - 1e-9 for i in op), \
-                (kw, v.hexagons)
+            # the mechanism: a hexagon opens with a load on its other contacts, dropped at once
+            # by the opening rule; by its axial contacts with the inclined ones loaded needs
+            # alpha > 90 deg - phi_g (else they slide first)
+            hx = v.hexagons
+            op = [i for i, o in enumerate(hx["opens"]) if o]
+            assert op and all(hx["N1"][i] > 0 or hx["N2"][i] > 0 for i in op), (kw, hx)
+            assert all(hx["alpha"][i] > 90.0 - kw["phi_g"] - 1e-9 for i in op
+                       if hx["via"][i] == "axial" and hx["N1"][i] > 0), (kw, hx)
     return end.outcome
 
 

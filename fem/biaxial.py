@@ -28,7 +28,11 @@ from .problem import Biaxial, Imperfection
 from .reference import material_point_curve
 from .solver import LoadStepper, StaticLoss
 
-__all__ = ["BiaxialConfig", "MATERIAL", "build_problem", "run_biaxial", "RunResult"]
+__all__ = ["BiaxialConfig", "MATERIAL", "build_problem", "run_biaxial", "RunResult", "BURST_POINTER"]
+
+# where a loss of the static state is made to happen dynamically
+BURST_POINTER = ("held past such a point the specimen cannot stay at rest: python -m fem burst "
+                 "makes this failure happen dynamically (docs/burst.md, docs/fem.md)")
 
 
 @dataclass
@@ -382,7 +386,8 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
     summ["end"] = None if loss is None else {
         "line": loss.line(prob.height), "eps1": loss.delta_max / prob.height,
         "eps1_last_row": float(curve["eps1"][-1]), "det_k_ff_sign": list(loss.det_sign),
-        "lam_min_ks_ff": list(loss.lam_min), "w2": list(loss.w2), "scan_points": loss.points}
+        "lam_min_ks_ff": list(loss.lam_min), "w2": list(loss.w2), "scan_points": loss.points,
+        "burst": BURST_POINTER}
     if mp is not None:
         summ["material_point"]["outcome"] = mp["outcome"]
         summ["material_point"]["end"] = mp["end"] if mp["outcome"] != "complete" else None

@@ -496,6 +496,7 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
                     "t_end": float(h["t"][-1]), "steps": int(len(h["t"]) - 1),
                     "energy_residual": float(np.max(h["energy_residual"])),
                     "T1": run.T1, "dt": run.dt, "mass": run.mass, "stiffness": run.stiffness,
+                    "time_steps_cut": run.cut_steps, "failure_reason": run.failure,
                 }
                 rows.append(row)
                 hists.append({"ratio": float(R), "start_fraction": f, "switch": switch, **h})

@@ -451,6 +451,7 @@ def cmd_domain(args, stage):
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
     t0 = _start(args, stage, f"bifurcation domain at sigma2 = {', '.join(f'{s:g}' for s in pressures)} Pa")
+
     def write_rows(pts):
         os.makedirs(args.out, exist_ok=True)
         cols = {k: np.array([getattr(d, k) for d in pts]) for k in DOMAIN_COLUMNS}

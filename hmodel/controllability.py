@@ -40,11 +40,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .material import HState, kernel_args, to_voigt, update_copies
+from .material import HState, to_voigt, update_copies
 from .params import HParams
 
-__all__ = ["Verdict", "PathEnd", "decide", "control_scan", "describe_control", "stress_name", "verdict_text", "SCAN_STRAIN",
-           "N_SCAN", "END_OUTCOMES"]
+__all__ = ["Verdict", "PathEnd", "decide", "control_scan", "describe_control", "stress_name",
+           "verdict_text", "SCAN_STRAIN", "N_SCAN", "END_OUTCOMES"]
 
 SCAN_STRAIN = 2e-3      # the bracket |e'_k| <= this of the scan (hmodel.burst.static_check's)
 SCAN_STRAIN_MAX = 0.032  # widened x4 up to this while the closest approach is at the bracket's end
@@ -196,8 +196,10 @@ def _block(tan, Ainv, free):
 
 
 def _indicators(tan, Ainv, free):
-    """(det, lam_min of the symmetric part, normalized W2 of the near-null free increment) of
-    the controlled block of each tangent row (n, 3, 3)."""
+    """(det, lam_min of the symmetric part, normalized W2 of its eigenvector) of the controlled
+    block of each tangent row (n, 3, 3). The eigenvector x (free entries, the others 0: every
+    control parameter held) has W2 = ds'.W.x = x.W M' x = lam_min, normalized by |x|_W |M' x|_W
+    (|v|_W^2 = v.W.v): within [-1, 1] by Cauchy-Schwarz."""
     B, Mp = _block(tan, Ainv, free)
     det = np.linalg.det(B)
     S = 0.5 * (B + np.swapaxes(B, 1, 2))
@@ -205,8 +207,9 @@ def _indicators(tan, Ainv, free):
     x = np.zeros((len(tan), 3))
     x[:, free] = vec[:, :, 0]
     resp = np.einsum("nab,nb->na", Mp, x)
+    norm_w = lambda v: np.sqrt(np.einsum("na,a,na->n", v, W_SHEAR, v))     # noqa: E731
     with np.errstate(invalid="ignore", divide="ignore"):
-        w2 = lam[:, 0] / np.linalg.norm(resp, axis=1)
+        w2 = lam[:, 0] / (norm_w(x) * norm_w(resp))
     return det, lam[:, 0], w2
 
 
@@ -405,12 +408,15 @@ def _analyse(sc: _Scan, t, g, tan, tol):
         xs = np.array([t[j - 1], x, t[j + 1]])
         gs = np.array([g[j - 1], gx, g[j + 1]])
         return _analyse(sc, xs, gs, sc.rows(xs)[1], tol)
-    # the controlled block on either side of the extremum: at the scan's neighbours of it (a
-    # smooth extremum is located only to about sqrt(ulp / curvature): closer, its sides blur)
-    det, lam, w2, hexa = sc.sides(float(t[j - 1]), float(t[j + 1]))
-    if det[0] * det[1] < 0 or (det[0] != 0.0) != (det[1] != 0.0):
-        return Verdict("uncontrollable", sc.k, sc.T, sc.T + gx, x, 0.0, det, lam, w2, 0.0, 0,
-                       hexa, math.nan)
+    # the controlled block on either side of the extremum, as close to it as its sign change
+    # shows (a smooth extremum is located only to about sqrt(ulp / curvature): closer, its sides
+    # blur), out to the scan's neighbours of it
+    spacing = float(t[1] - t[0])
+    for d in spacing * 10.0 ** -np.arange(8.0, -1.0, -1.0):
+        det, lam, w2, hexa = sc.sides(max(x - d, float(t[j - 1])), min(x + d, float(t[j + 1])))
+        if det[0] * det[1] < 0 or (det[0] != 0.0) != (det[1] != 0.0):
+            return Verdict("uncontrollable", sc.k, sc.T, sc.T + gx, x, 0.0, det, lam, w2, 0.0, 0,
+                           hexa, math.nan)
     # s'_k turns back with its slope keeping its sign: by a jump, a discontinuity, not W2 = 0
     h = 1e-9 * (t[-1] - t[0])
     jump = abs(sc.g(x + h) - sc.g(x - h))

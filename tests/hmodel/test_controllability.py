@@ -1,7 +1,6 @@
 """Every path ends in an answer (issue 25): cut steps, and where no static state exists under the
 control, the decision of ``hmodel.controllability`` (docs/hmodel.md)."""
 import json
-import math
 
 import numpy as np
 import pytest
@@ -193,3 +192,18 @@ def test_isotropic_state_without_static_state_is_named():
             drv.isotropic_state(HParams(n_dir=8))
     assert e.value.partial is None
 
+
+
+def test_two_free_variables_decide_by_the_dominant_one(start90):
+    """c prescribed and the shear stress held too (two free entries: the scan solves the shear
+    at each point): the same end as with the shear strain held (the isotropic fabric keeps it at
+    zero), the 2 x 2 block's determinant changing sign, W2 for the control in [-1, 1]."""
+    P = HParams()
+    two = MixedControl((False, True, False), (0.0, 0.0, 0.0), (20.0, 0.0, 0.0), ((1.0, 0.0), (2.0, 1.0)))
+    r = run_path(start90, P, two, 1000)
+    one = run_path(start90, P, proportional_strain_stress(-2.0, 20.0), 1000)
+    v = r.end.verdict
+    assert r.end.outcome == "uncontrollable" and v.variable == 0 and v.det[0] > 0 > v.det[1]
+    assert all(-1.0 <= w <= 1.0 for w in v.w2) and v.w2[0] > 0 > v.w2[1]
+    assert np.allclose(r.eps[-1], one.eps[-1], rtol=0, atol=1e-12)
+    assert v.reached == pytest.approx(one.end.verdict.reached, abs=1e-3)

@@ -199,7 +199,7 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
     run in a Numba loop, ``chunk`` steps at a time (``until`` is checked between chunks and the
     chunk is replayed up to the first step that satisfies it).
 
-    A step whose Newton iterations do not converge is cut in halves (``_cut_step``: the
+    A step whose Newton iterations do not converge is cut in halves (``_Cutter``: the
     substeps reach the step's own end, growing back x2 after each success; ``cuts`` records the
     halvings per step) down to 1 / 2**``max_cuts`` of it. A substep of that floor that still
     does not converge is decided by ``controllability.decide``: its root, where a static state

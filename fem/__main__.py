@@ -243,6 +243,10 @@ def _run(args, stage) -> int:
         return 1
     print(args.params_note)
     print(format_summary(res.summary))
+    end = res.summary.get("end")
+    print(f"outcome: {end['line'] if end else 'complete'}")
+    if end:
+        print(f"the run ends there (every converged row written); {end['burst']}")
     t = res.timings
     print(f"{t['steps']} steps, {t['iterations']} Newton iterations, {t['total']:.1f} s total "
           f"(update {t['update']:.1f} s, assembly {t['assembly']:.1f} s, solve {t['solve']:.1f} s, "

@@ -26,9 +26,13 @@ from .output import (CurveWriter, FieldWriter, plot_curve, read_curve, first_eve
                      nodal_vector, mode_fields, plot_mode)
 from .problem import Biaxial, Imperfection
 from .reference import material_point_curve
-from .solver import LoadStepper
+from .solver import LoadStepper, StaticLoss
 
-__all__ = ["BiaxialConfig", "MATERIAL", "build_problem", "run_biaxial", "RunResult"]
+__all__ = ["BiaxialConfig", "MATERIAL", "build_problem", "run_biaxial", "RunResult", "BURST_POINTER"]
+
+# where a loss of the static state is made to happen dynamically
+BURST_POINTER = ("held past such a point the specimen cannot stay at rest: python -m fem burst "
+                 "makes this failure happen dynamically (docs/burst.md, docs/fem.md)")
 
 
 @dataclass
@@ -241,7 +245,10 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
     it; ``params_note``: where the values came from, also in summary.json); ``progress`` is a
     callable taking one line of text (None: silent).
 
-    A step that fails after every cut-back raises RuntimeError; the converged steps are on disk.
+    A step that fails after every cut-back is decided by ``solver.static_scan``: a static state
+    further on continues the run; none under the platen's control ends it as a result
+    (summary "outcome": 'uncontrollable' or 'discontinuous', "end": where and why; the last row
+    the last converged state); undecided, RuntimeError. The converged steps are on disk.
     """
     _count("n_sphere", cfg.n_sphere)      # 0 divides by zero, < 0 turns the local W2 check off
     t_start = time.perf_counter()
@@ -337,7 +344,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
             logf.flush()
         emit(res.trial, res.f_int, info)
 
-    error = None
+    error = loss = None
     ended = False       # the steps ended (done, or a step failed), not an interrupt
     try:
         # row 0: the isotropic initial state, tangent of a zero increment
@@ -349,6 +356,10 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
         except RuntimeError as e:
             error = e
             log(f"FAILED: {e}")
+        except StaticLoss as e:
+            # no static state beyond under the platen's control: the run's result, not an error
+            loss = e.verdict
+            log(f"ENDED: {e}")
         ended = True
     finally:        # whatever ends the run (also Ctrl-C, SIGTERM): the writers close, complete
         try:
@@ -370,9 +381,20 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
     summ["config"] = asdict(cfg)
     summ["parameters"] = params_note
     summ["completed"] = error is None
+    summ["outcome"] = "complete" if loss is None and error is None else (
+        loss.outcome if loss is not None else "error")
+    summ["end"] = None if loss is None else {
+        "line": loss.line(prob.height), "eps1": loss.delta_max / prob.height,
+        "eps1_last_row": float(curve["eps1"][-1]), "det_k_ff_sign": list(loss.det_sign),
+        "lam_min_ks_ff": list(loss.lam_min), "w2": list(loss.w2), "scan_points": loss.points,
+        "burst": BURST_POINTER}
+    if mp is not None:
+        summ["material_point"]["outcome"] = mp["outcome"]
+        summ["material_point"]["end"] = mp["end"] if mp["outcome"] != "complete" else None
     if out is not None:
         plot_curve(out / "curve.png", curve, mp,
-                   title=f"{prob.nel} elements, {prob.npts} points, n_dir = {prob.params.n_dir}")
+                   title=f"{prob.nel} elements, {prob.npts} points, n_dir = {prob.params.n_dir}",
+                   end=loss.outcome if loss is not None else None)
         atomic_write_bytes(out / "summary.json", json.dumps(summ, indent=1, default=float).encode())
         logf.close()
     result = RunResult(curve, events, summ, timings, out, prob, steps, stepper.u.copy())

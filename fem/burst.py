@@ -38,7 +38,7 @@ from .output import CurveWriter, FieldWriter, cell_tensor, nodal_vector, plot_mo
 from hmodel.burst import CPeak, check_ratio
 
 from .reference import material_point_curve, material_point_path
-from .solver import LoadStepper
+from .solver import LoadStepper, StaticLoss
 
 __all__ = ["BurstConfig", "run_burst", "BurstResult", "BURST_COLUMNS", "PATH_COLUMNS",
            "DRAINED_EPS1_MAX"]
@@ -237,13 +237,17 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                         f"{100 * row['eps1']:.4f} %, eta = {row['eta']:.4f} (target "
                         f"{f * eta_peak:.4f})")
 
-        stepper.run(DRAINED_EPS1_MAX, on_drained, until=lambda: len(starts) == len(fractions))
+        lost = ""
+        try:
+            stepper.run(DRAINED_EPS1_MAX, on_drained, until=lambda: len(starts) == len(fractions))
+        except StaticLoss as e:
+            lost = f"; the drained path has no static state beyond: {e}"
         timings["drained"] += time.perf_counter() - t0
         missing = [f for f in fractions if f not in starts]
         if missing:
             raise RuntimeError(f"start fraction(s) {missing} not reached on the FE drained path "
                                f"by eps1 = {DRAINED_EPS1_MAX} (largest eta {last.get('eta', 0):.4f}"
-                               f", material point peak {eta_peak:.4f})")
+                               f", material point peak {eta_peak:.4f}){lost}")
 
         for f in cfg.start_fractions:
             start = starts[float(f)]
@@ -314,7 +318,8 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                                mode_nonuniform=nonuniform,
                                newton_iters_mean=float(h["newton_iters"][1:].mean())
                                if len(h["t"]) > 1 else 0.0,
-                               seconds=res.seconds)
+                               seconds=res.seconds, time_steps_cut=res.cut_steps,
+                               failure_reason=res.failure, path_end=path["end"])
                     rows.append(row)
                     runs.append((tag, res))
                     if burst_w is not None:
@@ -389,7 +394,13 @@ def _tied_path(prob, start: Snapshot, ratio: float, cfg: BurstConfig, say):
         peak.add(row["c"])
         last["snap"] = Snapshot(st.u.copy(), list(prob.material.states), res.f_int.copy(), row)
 
-    st.run(cfg.path_strain, on_step, until=lambda: peak.confirmed)
+    end = None
+    try:
+        st.run(cfg.path_strain, on_step, until=lambda: peak.confirmed)
+    except StaticLoss as e:
+        # no static state beyond under U1 prescribed: the path ends there, as at its strain
+        end = str(e)
+        say(f"path R = {ratio:g}: {e}")
     say(f"path R = {ratio:g}: {st.step} steps to eps1 = "
         f"{100 * (rows['eps1'][-1] - rows['eps1'][0]):.3f} % from the start, "
         f"{st.times['iterations']} Newton iterations")
@@ -397,8 +408,9 @@ def _tied_path(prob, start: Snapshot, ratio: float, cfg: BurstConfig, say):
     path["peak"] = peak.peak
     path["below"] = peak.below()
     path["cpeak"] = peak
+    path["end"] = end
     if peak.peak is None:
-        return path, [("below", last["snap"])]
+        return path, [("below", last["snap"])] if last else []
     want = {peak.peak: "past"}
     if path["below"] is not None:            # None: c falls at once, no state below the peak
         want[path["below"]] = "below"

@@ -35,6 +35,7 @@ from skfem.helpers import dot
 
 from hmodel.burst import Specimen
 from hmodel.burst_rule import BurstRule, decide
+from hmodel.driver import MAX_CUTS
 from .problem import Biaxial
 from .solver import FreeSolver, NewtonError
 
@@ -321,7 +322,9 @@ HISTORY_COLUMNS = ["step", "t", "eps1", "eps2", "c", "G", "U1", "ke", "w_ext", "
 class HoldResult(NamedTuple):
     """A run at a held force: outcome ('equilibrium', 'failure', 'undecided'), the history
     (HISTORY_COLUMNS -> (steps + 1,) arrays, row 0 the switch), the final displacement and
-    velocity (ndofs,) [m, m/s] (from the switch), T1 [s], dt [s], seconds."""
+    velocity (ndofs,) [m, m/s] (from the switch), T1 [s], dt [s], seconds; cut_steps: {step:
+    halvings} of the time steps run in substeps; failure: why the run ended as a failure when a
+    time step could not converge however cut ('' otherwise)."""
 
     outcome: str
     history: dict
@@ -330,6 +333,8 @@ class HoldResult(NamedTuple):
     t1: float
     dt: float
     seconds: float
+    cut_steps: dict = {}
+    failure: str = ""
 
 
 def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_period: int = 20,
@@ -398,42 +403,73 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
 
     if on_step is not None:
         on_step(0, m, system, row(0))
+    cut_steps, failure = {}, ""
+    floor = 0.5 ** MAX_CUTS
     while k < n_cap:
-        m1, trial, iters, _ = newmark_step(system, m, dt, scheme, rtol, max_iter)
-        system.commit(m1.z, trial)
-        dz = m1.z - m.z
-        ke1 = 0.5 * float(m1.v @ (M @ m1.v))
-        d_ext = float(dz @ system.f_ext)
-        d_int = 0.5 * float(dz @ (m.f + m1.f))
-        d_damp = 0.5 * alpha * float(dz @ (M @ (m.v + m1.v)))
+        # the time step, whole or (its Newton failing) in substeps: halves, growing back x2 after
+        # each success, down to dt / 2**MAX_CUTS; each substep Newmark's own, committed, so the
+        # step's works are the sums of its substeps' and the balance stays exact
+        frac, hs, depth, iters = 0.0, 1.0, 0, 0
+        d_ext = d_int = d_damp = d_w2e = d_f0 = 0.0
+        while frac < 1.0:
+            hs = min(hs, 1.0 - frac)
+            try:
+                m1, trial, it, _ = newmark_step(system, m, hs * dt, scheme, rtol, max_iter)
+            except NewtonError as e:
+                if hs * 0.5 >= floor:
+                    hs *= 0.5
+                    depth += 1
+                    continue
+                failure = (f"time step {k + 1} did not converge even in substeps of dt / "
+                           f"2**{MAX_CUTS} ({e}): the specimen's motion outran the integrator")
+                break
+            system.commit(m1.z, trial)
+            dz = m1.z - m.z
+            d_ext += float(dz @ system.f_ext)
+            d_int += 0.5 * float(dz @ (m.f + m1.f))
+            d_damp += 0.5 * alpha * float(dz @ (M @ (m.v + m1.v)))
+            d_w2e += float(dz @ (system.f_ext - f_ext0))
+            d_f0 += float(dz @ f0)
+            iters += it
+            m = m1
+            frac += hs
+            hs *= 2.0
+        if depth or failure:
+            cut_steps[k + 1] = MAX_CUTS if failure else depth
+        if failure and frac == 0.0:
+            outcome = "failure"
+            break
+        ke1 = 0.5 * float(m.v @ (M @ m.v))
         k += 1
-        h["step"][k], h["t"][k] = k, k * dt
-        U1 = float(m1.z[-1])
+        h["step"][k], h["t"][k] = k, (k - 1 + frac) * dt
+        U1 = float(m.z[-1])
         h["U1"][k] = U1
         h["eps1"][k] = eps_ref[0] + U1 / H
         h["eps2"][k] = eps_ref[1] + R * U1 / H
-        h["G"][k] = float(m1.f[-1])
+        h["G"][k] = float(m.f[-1])
         h["c"][k] = h["G"][k] / B
         h["ke"][k] = ke1
         h["w_ext"][k] = h["w_ext"][k - 1] + d_ext
         h["w_int"][k] = h["w_int"][k - 1] + d_int
         h["damping"][k] = h["damping"][k - 1] + d_damp
-        h["w2_ext"][k] = h["w2_ext"][k - 1] + float(dz @ (system.f_ext - f_ext0))
-        h["w2_int"][k] = h["w2_int"][k - 1] + d_int - float(dz @ f0)
+        h["w2_ext"][k] = h["w2_ext"][k - 1] + d_w2e
+        h["w2_int"][k] = h["w2_int"][k - 1] + d_int - d_f0
         scale = max(scale, ke1, abs(h["w2_ext"][k]), abs(h["w2_int"][k]), h["damping"][k])
         res = (ke1 - h["ke"][k - 1]) - (d_ext - d_int - d_damp)
         eq1 = ke1 - (h["w2_ext"][k] - h["w2_int"][k] - h["damping"][k])
         h["balance_residual"][k] = abs(res) / scale if scale > 0 else 0.0
         h["eq1_residual"][k] = abs(eq1) / scale if scale > 0 else 0.0
-        h["u_norm"][k] = float(np.linalg.norm(tie.displacement(m1.z)))
+        h["u_norm"][k] = float(np.linalg.norm(tie.displacement(m.z)))
         h["newton_iters"][k] = iters
-        m = m1
         if on_step is not None:
             on_step(k, m, system, row(k))
+        if failure:
+            outcome = "failure"
+            break
         s = slice(0, k + 1)
         outcome = decide(h["t"][s], h["ke"][s], h["w2_ext"][s], h["eps1"][s], window, rule)
         if outcome is not None:
             break
     history = {key: v[:k + 1].copy() for key, v in h.items()}
     return HoldResult(outcome or "undecided", history, tie.displacement(m.z),
-                      tie.displacement(m.v), t1, dt, time.perf_counter() - t0)
+                      tie.displacement(m.v), t1, dt, time.perf_counter() - t0, cut_steps, failure)

@@ -250,12 +250,15 @@ def plot_mode(path, prob, u: np.ndarray, title: str = "") -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def plot_curve(path, curve: dict, mp: dict | None = None, title: str = "") -> None:
+def plot_curve(path, curve: dict, mp: dict | None = None, title: str = "",
+               end: str | None = None) -> None:
     """q against eps1 (compression positive) with the first firing of each criterion marked:
     lam_min(K_s) <= 0 and the det K sign change (both platen controls), the first point with
     local W2 <= 0 and with Rice's indicator <= 0; beside the material-point curve. The markers are
     hollow and of growing sizes, so that criteria firing at the same step stay visible; the
-    confining pressure (s2 of row 0) heads the title."""
+    confining pressure (s2 of row 0) heads the title. ``end``: the outcome of a run that ended
+    without a static state (its last row marked), and the material point's own end likewise
+    (``mp["end"]``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -266,6 +269,12 @@ def plot_curve(path, curve: dict, mp: dict | None = None, title: str = "") -> No
                 label=r"material point (hmodel.driver, $\delta\varepsilon_1$ = 1e-5)")
     e, q = 100 * curve["eps1"], curve["q"] / 1e3
     ax.plot(e, q, "o-", ms=2.5, lw=1, color="C0", label="FE specimen")
+    if end is not None:
+        ax.plot(e[-1], q[-1], "X", color="C1", ms=11, zorder=40,
+                label=f"FE: no static state beyond ({end} at {e[-1]:.3f} %)")
+    if mp is not None and mp.get("outcome", "complete") != "complete":
+        ax.plot(100 * mp["eps1"][-1], mp["q"][-1] / 1e3, "kX", ms=9, zorder=40,
+                label=f"material point: no static state beyond ({mp['outcome']})")
     marks = first_events(curve)
     style = {"lam_min_ks": ("v", "C1", r"first $\lambda_{min}(K_s) \leq 0$ (platen displ.)"),
              "det_k": ("s", "C3", r"first $\det K$ sign change (platen displ.)"),

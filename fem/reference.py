@@ -68,13 +68,15 @@ def material_point_criteria(params: HParams, d_eps1: float, n_steps: int) -> dic
 
 def material_point_curve(params: HParams, eps1_max: float, d_eps1: float = 1e-5) -> dict:
     """The drained biaxial curve of hmodel.driver (for the figure and the peak): eps1, q, p, eta,
-    and the peak (eps1_peak, q_peak, eta_peak)."""
+    the peak (eps1_peak, q_peak, eta_peak), and how the path ended (outcome, end: the line of
+    ``PathResult.end``, e.g. 'discontinuous at eps1 = ...' where no static state exists beyond)."""
     n = max(1, int(round(eps1_max / d_eps1)))
     r = run_path(isotropic_state(params), params, drained_biaxial(d_eps1), n)
     p, q, eta = r.invariants()
     k = int(np.argmax(q))
     return {"eps1": r.eps[:, 0], "q": q, "p": p, "eta": eta, "eps1_peak": float(r.eps[k, 0]),
-            "q_peak": float(q[k]), "eta_peak": float(eta[k]), "peak_is_interior": k < len(q) - 1}
+            "q_peak": float(q[k]), "eta_peak": float(eta[k]), "peak_is_interior": k < len(q) - 1,
+            "outcome": r.end.outcome, "end": r.end.line()}
 
 
 def material_point_path(params: HParams, eta_start: float, ratio: float, d_eps1: float,

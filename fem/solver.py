@@ -11,16 +11,20 @@ in which the pattern switches shows a non-quadratic ratio and ``pattern_changes`
 """
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .problem import Biaxial, PatternGather
 
-__all__ = ["NewtonError", "StepResult", "FreeSolver", "newton_step", "LoadStepper"]
+__all__ = ["NewtonError", "StepResult", "FreeSolver", "newton_step", "LoadStepper", "StaticLoss",
+           "StaticVerdict", "static_scan"]
 
 
 class NewtonError(RuntimeError):
@@ -145,6 +149,203 @@ def newton_step(prob: Biaxial, u_old: np.ndarray, u_guess: np.ndarray, rtol: flo
                       f"{res[-1]:.3e} > rtol = {rtol:.1e} x sigma2 x height)", res)
 
 
+class StaticVerdict(NamedTuple):
+    """What ``static_scan`` found beyond the last converged state (lengths [m], SI).
+
+    outcome : 'exists' (``result``: a converged state further on), 'uncontrollable' (the platen
+        displacement turns at ``delta_max`` < the step's end, det K_ff changing sign: no static
+        state beyond under it), 'discontinuous' (it turns there while det K_ff keeps its sign: a
+        kink or jump of the response) or 'unresolved' (the path could not be followed further,
+        nothing proven).
+    delta_start, delta_target, delta_max : the platen displacement of the last converged state,
+        of the failed step's end, and the largest one the scan reached [m].
+    det_sign, lam_min, w2 : of the free dofs' stiffness K_ff (the controlled block; lam_min and
+        w2 of its symmetric part: the smallest eigenvalue [Pa] and the normalized second-order
+        work of its eigenvector, v.K v / (|v| |K v|)), before and after the turning point or at
+        the last two points of the scan.
+    points : converged points of the scan; result : (StepResult, platen displacement) of the
+        state accepted when it exists, else None.
+    """
+
+    outcome: str
+    delta_start: float
+    delta_target: float
+    delta_max: float
+    det_sign: tuple
+    lam_min: tuple
+    w2: tuple
+    points: int
+    result: object = None
+
+    def line(self, height: float) -> str:
+        """In words, strains as delta / height."""
+        e = lambda d: f"{100 * d / height:.4f} %"      # noqa: E731
+        if self.outcome == "unresolved":
+            return (f"the equilibrium path could not be followed past eps1 = {e(self.delta_max)} "
+                    f"(the step to {e(self.delta_target)} asked) and det K_ff kept its sign "
+                    f"({self.det_sign[0]:+d}, {self.det_sign[1]:+d}; lam_min {self.lam_min[0]:.4g}, "
+                    f"{self.lam_min[1]:.4g} Pa): no limit point (W2 > 0 for this control), no "
+                    "static state found either")
+        if self.outcome == "uncontrollable":
+            return (f"uncontrollable at eps1 = {e(self.delta_max)}: along the equilibrium path the "
+                    f"platen displacement turns back at eps1 = {e(self.delta_max)}, short of the "
+                    f"{e(self.delta_target)} asked (snap-back); det K_ff goes from "
+                    f"{self.det_sign[0]:+d} to {self.det_sign[1]:+d}, lam_min of its symmetric part "
+                    f"from {self.lam_min[0]:.4g} to {self.lam_min[1]:.4g} Pa, W2 for this control "
+                    f"from {self.w2[0]:+.3g} to {self.w2[1]:+.3g}")
+        if self.outcome == "discontinuous":
+            return (f"discontinuous at eps1 = {e(self.delta_max)}: along the equilibrium path the "
+                    f"platen displacement turns back there, short of the {e(self.delta_target)} "
+                    f"asked, while det K_ff keeps its sign ({self.det_sign[0]:+d}, "
+                    f"{self.det_sign[1]:+d}; lam_min {self.lam_min[0]:.4g}, {self.lam_min[1]:.4g} "
+                    "Pa): a jump of the material's response, not W2 = 0")
+        return f"{self.outcome}: the scan reached eps1 = {e(self.delta_max)} of {e(self.delta_target)}"
+
+
+class StaticLoss(Exception):
+    """A load step without a static state under the applied control (``verdict``: a
+    StaticVerdict); not a RuntimeError: the caller ends its path with it as a result."""
+
+    def __init__(self, msg, verdict: StaticVerdict):
+        super().__init__(msg)
+        self.verdict = verdict
+
+
+def _control_block(K, free) -> tuple:
+    """(det sign, lam_min of the symmetric part [Pa], normalized W2 of its eigenvector) of the
+    free dofs' stiffness K_ff."""
+    from .indicators import det_sign, lam_min_sym
+    Kff = K[free][:, free].tocsc()
+    sign, _ = det_sign(Kff)
+    S = 0.5 * (Kff + Kff.T)
+    if Kff.shape[0] <= 2000:
+        w, V = np.linalg.eigh(S.toarray())
+        lam, v = float(w[0]), V[:, 0]
+        return sign, lam, float(lam / np.linalg.norm(Kff @ v))
+    lam, _ = lam_min_sym(S)
+    return sign, float(lam), math.nan
+
+
+def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, last=None,
+                rtol: float = 1e-10, max_iter: int = 25, max_points: int = 400) -> StaticVerdict:
+    """Is there a static state beyond the committed one (displacement ``u_n``, platen
+    ``delta_n``) when the step to ``delta_n + h`` fails however it is cut? A one-parameter scan
+    of the controlled variable (the platen displacement delta) along the equilibrium path
+    (Riks's arc-length): unknowns y = (u_free, delta), equations r_free(u) = 0 and
+    d.(y - y_n) = t, d the unit vector of ``last`` (the last converged increment (du (ndofs,),
+    d delta); default: delta alone), each point Newton on the bordered system
+    [[K_ff, K_fp g], [d_u, d_delta]], g = d u_prescribed / d delta. Steps of t: a quarter of
+    ``last``'s length (at most an eighth of the step h along d), halved where Newton fails (down
+    to 1/1024), doubled after a success; at most ``max_points``. The material is the committed
+    state's, each point's trial from it (nothing committed).
+
+    'exists' once delta reaches delta_n + h (the result: the furthest converged point not past
+    it, or the first past it); 'uncontrollable' where delta turns back first (a limit point of
+    the displacement-controlled problem: det K_ff changes sign there, W2 = 0 for this control),
+    or where the path stops with det K_ff changing sign over its last interval; 'discontinuous'
+    where delta turns back with det K_ff keeping its sign; else 'unresolved'."""
+    mat = prob.material
+    free, presc = prob.free, prob.prescribed
+    f_ref = prob.sigma2 * prob.height
+    g = prob.prescribed_values(1.0) - prob.prescribed_values(0.0)
+    base = prob.prescribed_values(0.0)
+    eps_n = prob.strain(u_n)
+    nf = free.size
+    d = np.zeros(nf + 1)
+    if last is not None:
+        d[:nf], d[nf] = np.asarray(last[0])[free], float(last[1])
+    if not d[nf] > 0:
+        d[:] = 0.0
+        d[nf] = 1.0
+    length = float(np.linalg.norm(d)) if last is not None else math.inf
+    d /= np.linalg.norm(d)
+    y_n = np.append(u_n[free], delta_n)
+    target = delta_n + h
+    dt_max = h / d[nf] / 8.0
+    dt = min(dt_max, length / 4.0)
+    dt_min = dt / 1024.0
+
+    def state(y):
+        u = u_n.copy()
+        u[free] = y[:nf]
+        u[presc] = base + g * y[nf]
+        return u
+
+    def solve_at(t, y0):
+        y = y0.copy()
+        for _ in range(max_iter + 1):
+            u = state(y)
+            try:
+                trial = mat.trial(prob.strain(u) - eps_n)
+            except ValueError:
+                return None
+            f = prob.internal_force(trial.sigma)
+            r = (f - prob.f_lat)[free]
+            c = float(d @ (y - y_n) - t)
+            if not np.isfinite(r).all():
+                return None
+            rn = float(np.linalg.norm(r)) / f_ref
+            if rn <= rtol and abs(c) <= 1e-12 * max(abs(t), h):
+                return y, u, f, trial, rn
+            K = prob.stiffness(trial.D)
+            J = sp.bmat([[K[free][:, free], sp.csr_matrix(K[free][:, presc] @ g[:, None])],
+                         [sp.csr_matrix(d[None, :nf]), sp.csr_matrix([[d[nf]]])]]).tocsc()
+            try:
+                dy = spla.spsolve(J, -np.append(r, c))
+            except RuntimeError:
+                return None
+            if not np.isfinite(dy).all():
+                return None
+            y = y + dy
+        return None
+
+    pts = [(0.0, y_n, u_n, None, None, 0.0)]          # (t, y, u, f, trial, residual)
+    t, tang = 0.0, d.copy()
+    while len(pts) <= max_points and dt >= dt_min:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", spla.MatrixRankWarning)
+            got = solve_at(t + dt, pts[-1][1] + dt * tang)
+        if got is None:
+            dt *= 0.5
+            continue
+        y, u, f, trial, rn = got
+        tang = (y - pts[-1][1]) / dt
+        t += dt
+        pts.append((t, y, u, f, trial, rn))
+        if y[nf] >= target or y[nf] < pts[-2][1][nf]:
+            break                          # reached the step's end, or delta turned back
+        dt = min(2.0 * dt, dt_max)
+    deltas = np.array([p[1][nf] for p in pts])
+
+    def block(k):
+        trial = pts[k][4] if k > 0 else mat.trial(np.zeros_like(eps_n))
+        return _control_block(prob.stiffness(trial.D), free)
+
+    def verdict(outcome, a, b):
+        return StaticVerdict(outcome, delta_n, target, float(deltas.max()), (a[0], b[0]),
+                             (a[1], b[1]), (a[2], b[2]), len(pts) - 1)
+
+    if deltas[-1] >= target:
+        below = [k for k in range(1, len(pts)) if delta_n < deltas[k] <= target]
+        k = max(below, key=lambda j: deltas[j]) if below else len(pts) - 1
+        _, y, u, f, trial, rn = pts[k]
+        nan2 = (math.nan, math.nan)
+        res = StepResult(u, f, trial, [rn], [0])
+        return StaticVerdict("exists", delta_n, target, float(deltas.max()), (0, 0), nan2, nan2,
+                             len(pts) - 1, (res, float(y[nf])))
+    k = len(pts) - 1
+    if k >= 1 and deltas[k] < deltas[k - 1]:
+        # delta turns back along the path, between points k - 2 (still rising) and k: a limit
+        # point when det K_ff changes sign there
+        a, b = block(max(k - 2, 0)), block(k)
+        return verdict("uncontrollable" if a[0] != b[0] else "discontinuous", a, b)
+    # the path could not be followed further: a limit point within its last interval if det K_ff
+    # changed sign there; else nothing is proven (a jump of the material's response, or only
+    # Newton's difficulty: the FE can find other states, unlike one material point)
+    a, b = block(max(k - 1, 0)), block(k)
+    return verdict("uncontrollable" if a[0] != b[0] else "unresolved", a, b)
+
+
 class LoadStepper:
     """Displacement-driven load steps with automatic cut-back.
 
@@ -194,7 +395,11 @@ class LoadStepper:
 
     def advance(self, h: float):
         """One load step of platen displacement h [m] with cut-back. Returns (StepResult, h_done,
-        cutbacks). Raises RuntimeError when the step fails even after max_cutbacks halvings."""
+        cutbacks). A step that still fails after max_cutbacks halvings is decided by
+        ``static_scan``: where a static state exists further on, the scan's converged state is
+        the step's end (h_done its platen displacement); where none exists under the control,
+        StaticLoss (``verdict``: 'uncontrollable' or 'discontinuous'); RuntimeError when the
+        scan can decide neither."""
         cut = 0
         while True:
             try:
@@ -206,11 +411,8 @@ class LoadStepper:
                     self.log(f"step {self.step + 1}: d_eps1 = {h / self.prob.height:.3e} failed "
                              f"({e}); residuals {['%.2e' % r for r in e.residuals]}")
                 if cut >= self.max_cutbacks:
-                    raise RuntimeError(
-                        f"load step {self.step + 1} at eps1 = {self.eps1:.6g} did not converge even "
-                        f"after {cut} cut-backs (last d_eps1 = {h / self.prob.height:.3e}): {e}. "
-                        f"Allowed: a smaller d_eps1, more max_cutbacks (>= 0) or max_iter (>= 1)"
-                    ) from None
+                    res, h = self._decide(h, cut, e)
+                    break
                 cut += 1
                 h *= 0.5
         prob = self.prob
@@ -225,6 +427,26 @@ class LoadStepper:
             self.times[key] += res.times[key]
         self.times["iterations"] += res.iterations
         return res, h, cut
+
+    def _decide(self, h, cut, err):
+        """The step to delta + h failed at the floor of its cut-backs: ``static_scan``."""
+        H = self.prob.height
+        last = None if self._du_last is None else (self._du_last, self._h_last)
+        v = static_scan(self.prob, self.u, self.delta, h, last, self.rtol, self.max_iter)
+        if self.log:
+            self.log(f"step {self.step + 1}: static scan beyond eps1 = {self.eps1:.6g} ({v.points} "
+                     f"points): {v.line(H)}")
+        if v.outcome == "exists":
+            res, delta = v.result
+            return res, delta - self.delta
+        if v.outcome == "unresolved":
+            raise RuntimeError(
+                f"load step {self.step + 1} at eps1 = {self.eps1:.6g} did not converge even after "
+                f"{cut} cut-backs (last d_eps1 = {h / H:.3e}): {err}; the static scan along the "
+                f"equilibrium path could neither continue it nor show that it ends ({v.line(H)}). "
+                f"Allowed: a smaller d_eps1, more max_cutbacks (>= 0) or max_iter (>= 1)") from None
+        raise StaticLoss(f"load step {self.step + 1}: no static state beyond eps1 = "
+                         f"{self.eps1:.6g} under the platen's control: {v.line(H)}", v)
 
     def run(self, eps1_max: float, on_step=None, until=None):
         """Steps until eps1 = eps1_max, growing the increment back after cut-backs; or, with

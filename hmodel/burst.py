@@ -28,11 +28,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .burst_rule import BurstRule, decide, ke_growth
-from .driver import (MixedControlError, PathResult, mixed_step, proportional_strain,
+from .burst_rule import BurstRule, decide as decide_outcome, ke_growth
+from .controllability import control_scan, decide, verdict_text
+from .driver import (MAX_CUTS, MixedControlError, PathResult, mixed_step, proportional_strain,
                      proportional_strain_stress, run_path, stress_invariants)
 from .experiment import DOMAIN_EPS1_MAX, biaxial_test, state_at_eta
-from .material import HState, broadcast_state, to_voigt, update, update_full
+from .material import HState, to_voigt, update, update_full
 from .params import HParams
 
 __all__ = ["check_ratio", "Specimen", "Dynamics", "PathInfo", "HoldResult", "conjugate_stress", "path_direction",
@@ -119,7 +120,8 @@ def drained_peak_eta(params: HParams, d_eps1: float = 1e-5, eps1_max: float = 0.
     _, q, eta = r.invariants()
     k = int(np.argmax(q))
     if k == len(q) - 1:
-        raise ValueError(f"the drained test does not peak within eps1 = {eps1_max}")
+        why = "" if r.end.outcome == "complete" else f"; the path ends {r.end.line()}"
+        raise ValueError(f"the drained test does not peak within eps1 = {eps1_max}{why}")
     return float(eta[k]), r
 
 
@@ -215,21 +217,25 @@ def static_check(state: HState, params: HParams, ratio: float, c_target: float,
 
     ``converged``: the c-controlled Newton step (``proportional_strain_stress``) from ``state``;
     ``c_max_scan``: the largest c of the one-step responses to d eps = (e, R e, 0) for e over
-    [-scan_strain, scan_strain] (n_scan values, each deciding its own sliding pattern): below
-    ``c_target``, no strain along the tie within the bracket reaches it, so the Newton failure is
-    the absence of a static solution, not a bad start. ``d_eps1`` of the converged step."""
+    [-scan_strain, scan_strain] (n_scan values, each deciding its own sliding pattern,
+    ``controllability.control_scan``): below ``c_target``, no strain along the tie within the
+    bracket reaches it, so the Newton failure is the absence of a static solution, not a bad
+    start. ``d_eps1`` of the converged step. Where Newton fails, ``verdict`` is the decision of
+    ``controllability.decide`` ('uncontrollable' past the c peak: W2 = d eps1 dc = 0 there, the
+    block dc/d eps1 changing sign) and ``verdict_line`` its words; 'exists' where it converged."""
     ctl = proportional_strain_stress(ratio)
-    out = {"c_target": float(c_target)}
+    target = np.array([c_target, 0.0, 0.0])
+    out = {"c_target": float(c_target), "verdict": "exists", "verdict_line": ""}
     try:
-        _, de, it = mixed_step(state, params, ctl, [c_target, 0.0, 0.0])
+        _, de, it = mixed_step(state, params, ctl, target)
         out.update(converged=True, d_eps1=float(de[0]), iterations=int(it))
     except MixedControlError as e:
         out.update(converged=False, d_eps1=math.nan, iterations=-1, why=str(e))
+        tol = 1e-10 * max(abs(float(c_target)), 1e-3 * params.p0)     # mixed_step's
+        v = decide(state, params, ctl, target, np.zeros(3), tol)
+        out.update(verdict=v.outcome, verdict_line=verdict_text(v, "c"))
     e = np.linspace(-scan_strain, scan_strain, n_scan)
-    d_eps = np.zeros((2, 2, n_scan))
-    d_eps[0, 0], d_eps[1, 1] = e, ratio * e
-    sig = to_voigt(update(broadcast_state(state, (n_scan,)), d_eps, params)[0])
-    c = conjugate_stress(sig, ratio)
+    c = control_scan(state, params, ctl, np.zeros(3), target, e, 0)[0][:, 0]
     k = int(np.argmax(c))
     out.update(c_max_scan=float(c[k]), d_eps1_c_max=float(e[k]), scan_strain=float(scan_strain))
     return out
@@ -240,7 +246,8 @@ class HoldResult(NamedTuple):
     [s], generalized mass [kg/m] and stiffness [N/m^2], and the history (dict of arrays, one row a
     step, row 0 the switch): t [s], U1 [m], v [m/s], eps1, eps2 (from the start of the path), c
     [Pa], G_int [N/m], ke, w_ext, w_int, w2_ext, w2_int, damping [J/m], energy_residual [-],
-    newton_iters."""
+    newton_iters. cut_steps: {step: halvings} of the steps run in substeps; failure: why the run
+    ended as a failure when a time step could not converge at all ('' otherwise)."""
 
     outcome: str
     T1: float
@@ -248,6 +255,8 @@ class HoldResult(NamedTuple):
     mass: float
     stiffness: float
     history: dict
+    cut_steps: dict = {}
+    failure: str = ""
 
 
 def _tie_response(state, params, ratio, x):
@@ -309,60 +318,110 @@ def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch
     st = state
     x = 0.0                       # d eps1 of the step (guess: none)
     outcome = None
+    cut_steps = {}
+    floor = 0.5 ** MAX_CUTS
     for n in range(1, n_max + 1):
-        # Newton on x = d eps1 of the step: m a(x) + C v(x) + B c(x) = G_ext, with
-        # a(x) = 4 (H x - dt v)/dt^2 - a_n, v(x) = 2 H x / dt - v_n
-        def residual(x):
-            c, dc, ns = _tie_response(st, params, ratio, x)
-            a1 = 4.0 * (H * x - dt * v) / dt ** 2 - a
-            v1 = 2.0 * H * x / dt - v
-            return m * a1 + damp * v1 + B * c - G_ext, m * 4.0 * H / dt ** 2 + damp * 2.0 * H / dt + B * dc, c, ns
-        r, J, c, ns = residual(x)
-        it = 0
-        while abs(r) > tol:
-            if it >= max_iter or not J > 0:
-                raise RuntimeError(f"step {n}: the dynamic Newton did not converge (residual "
-                                   f"{r:.3e} N/m after {it} iterations)")
-            dx = -r / J
-            lam = 1.0
-            while True:
-                r1, J1, c1, ns1 = residual(x + lam * dx)
-                if abs(r1) < (1.0 - 1e-4 * lam) * abs(r) or lam < 1e-8:
-                    break
-                lam *= 0.5
-            x, r, J, c, ns = x + lam * dx, r1, J1, c1, ns1
-            it += 1
-        du = H * x
-        a1 = 4.0 * (du - dt * v) / dt ** 2 - a
-        v1 = 2.0 * du / dt - v
-        G1 = B * c
-        # the work of each force over the step (trapezoid: exact for this integrator's balance)
-        dw_ext = du * G_ext
-        dw_int = du * 0.5 * (G_int + G1)
-        dD = du * damp * 0.5 * (v + v1)
-        ke1 = 0.5 * m * v1 * v1
-        dke = ke1 - cols["ke"][-1]
-        dw2_ext = du * (G_ext - G0)
-        dw2_int = du * 0.5 * ((G_int - G0) + (G1 - G0))
-        scale = max(abs(dke), abs(dw2_ext), abs(dw2_int), abs(dD))
-        res = abs(dke - (dw2_ext - dw2_int - dD)) / scale if scale > 0 else 0.0
-        u, v, a, G_int, st = u + du, v1, a1, G1, ns
-        cols["t"].append(n * dt); cols["U1"].append(u); cols["v"].append(v); cols["c"].append(c)
+        # the step, whole or (its Newton failing) in substeps: halves, growing back x2 after
+        # each success, down to dt / 2**MAX_CUTS; each substep Newmark's own (its balance exact)
+        frac, h, depth = 0.0, 1.0, 0
+        dw = dict.fromkeys(("w_ext", "w_int", "w2_ext", "w2_int", "damping"), 0.0)
+        ke0, its, failed = 0.5 * m * v * v, 0, None
+        while frac < 1.0:
+            h = min(h, 1.0 - frac)
+            try:
+                x, c, ns, it = _tie_newmark(st, params, ratio, m, damp, B, H, G_ext, h * dt, v, a,
+                                            h * x, tol, max_iter)
+            except _NewtonFailed as e:
+                if h * 0.5 >= floor:
+                    h *= 0.5
+                    depth += 1
+                    continue
+                failed = str(e)
+                break
+            du = H * x
+            hs = h * dt
+            a1 = 4.0 * (du - hs * v) / hs ** 2 - a
+            v1 = 2.0 * du / hs - v
+            G1 = B * c
+            # the work of each force over the substep (trapezoid: exact for the balance)
+            dw["w_ext"] += du * G_ext
+            dw["w_int"] += du * 0.5 * (G_int + G1)
+            dw["damping"] += du * damp * 0.5 * (v + v1)
+            dw["w2_ext"] += du * (G_ext - G0)
+            dw["w2_int"] += du * 0.5 * ((G_int - G0) + (G1 - G0))
+            u, v, a, G_int, st, c_end = u + du, v1, a1, G1, ns, c
+            its += it
+            x /= h                        # the next (sub)step's guess, per whole step
+            frac += h
+            h *= 2.0
+        if depth:
+            cut_steps[n] = depth
+        if failed is not None:
+            # no time step, however small, converges: the specimen's collapse outruns the
+            # integrator (the step was cut to dt / 2**MAX_CUTS): recorded as the failure
+            outcome = "failure"
+            cut_steps[n] = MAX_CUTS
+            fail_why = (f"time step {n} did not converge even in substeps of dt / 2**{MAX_CUTS} "
+                        f"({failed})")
+            if frac == 0.0:
+                break
+        ke1 = 0.5 * m * v * v
+        dke = ke1 - ke0
+        scale = max(abs(dke), abs(dw["w2_ext"]), abs(dw["w2_int"]), abs(dw["damping"]))
+        res = (abs(dke - (dw["w2_ext"] - dw["w2_int"] - dw["damping"])) / scale
+               if scale > 0 else 0.0)
+        cols["t"].append((n - 1 + frac) * dt); cols["U1"].append(u); cols["v"].append(v)
+        cols["c"].append(c_end)
         cols["ke"].append(ke1)
-        for k, d in (("w_ext", dw_ext), ("w_int", dw_int), ("w2_ext", dw2_ext),
-                     ("w2_int", dw2_int), ("damping", dD)):
+        for k, d in dw.items():
             cols[k].append(cols[k][-1] + d)
         cols["energy_residual"].append(res)
-        cols["newton_iters"].append(it)
+        cols["newton_iters"].append(its)
         e1.append(e1[0] + u / H)
-        outcome = decide(cols["t"], np.array(cols["ke"]), cols["w2_ext"], e1, window, rule)
+        if outcome is not None:
+            break
+        outcome = decide_outcome(cols["t"], np.array(cols["ke"]), cols["w2_ext"], e1, window, rule)
         if outcome is not None:
             break
     hist = {k: np.asarray(vals, float) for k, vals in cols.items()}
     hist["eps1"] = np.asarray(e1)
     hist["eps2"] = float(eps_switch[1]) + ratio * (hist["eps1"] - e1[0])
     hist["G_int"] = B * hist["c"]
-    return HoldResult(outcome or "undecided", T1, dt, m, k_el, hist)
+    return HoldResult(outcome or "undecided", T1, dt, m, k_el, hist, cut_steps,
+                      fail_why if failed is not None else "")
+
+
+class _NewtonFailed(RuntimeError):
+    """A time step of ``hold`` whose Newton did not converge."""
+
+
+def _tie_newmark(st, params, ratio, m, damp, B, H, G_ext, dt, v, a, x, tol, max_iter):
+    """One Newmark (average acceleration) step of length ``dt`` of the tied specimen from
+    ``st`` at velocity ``v``, acceleration ``a``: Newton with backtracking on x = d eps1 from the
+    guess ``x``, m a(x) + C v(x) + B c(x) = G_ext, a(x) = 4 (H x - dt v)/dt^2 - a,
+    v(x) = 2 H x / dt - v. Returns (x, c, new state, iterations); raises _NewtonFailed."""
+    def residual(x):
+        c, dc, ns = _tie_response(st, params, ratio, x)
+        a1 = 4.0 * (H * x - dt * v) / dt ** 2 - a
+        v1 = 2.0 * H * x / dt - v
+        return (m * a1 + damp * v1 + B * c - G_ext,
+                m * 4.0 * H / dt ** 2 + damp * 2.0 * H / dt + B * dc, c, ns)
+    r, J, c, ns = residual(x)
+    it = 0
+    while abs(r) > tol:
+        if it >= max_iter or not J > 0:
+            raise _NewtonFailed(f"the dynamic Newton did not converge (residual {r:.3e} N/m after "
+                                f"{it} iterations)")
+        dx = -r / J
+        lam = 1.0
+        while True:
+            r1, J1, c1, ns1 = residual(x + lam * dx)
+            if abs(r1) < (1.0 - 1e-4 * lam) * abs(r) or lam < 1e-8:
+                break
+            lam *= 0.5
+        x, r, J, c, ns = x + lam * dx, r1, J1, c1, ns1
+        it += 1
+    return x, c, ns, it
 
 
 class BurstResult(NamedTuple):
@@ -430,12 +489,14 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
                     "switch": switch, "eta_switch": float(info.eta[k]),
                     "eps1_switch": float(p.eps[k, 0]), "c_switch": c_sw, "dc": float(dc_run),
                     "static_solution": bool(stat["converged"]), "c_max_scan": stat["c_max_scan"],
+                    "static_verdict": stat["verdict"], "static_verdict_line": stat["verdict_line"],
                     "outcome": run.outcome, "ke_growth": ke_growth(h["ke"]),
                     "ke_max": float(np.max(h["ke"])), "w2_ext_end": float(h["w2_ext"][-1]),
                     "w2_int_end": float(h["w2_int"][-1]), "damping_end": float(h["damping"][-1]),
                     "t_end": float(h["t"][-1]), "steps": int(len(h["t"]) - 1),
                     "energy_residual": float(np.max(h["energy_residual"])),
                     "T1": run.T1, "dt": run.dt, "mass": run.mass, "stiffness": run.stiffness,
+                    "time_steps_cut": run.cut_steps, "failure_reason": run.failure,
                 }
                 rows.append(row)
                 hists.append({"ratio": float(R), "start_fraction": f, "switch": switch, **h})

@@ -18,13 +18,16 @@ from . import fit as hfit
 from . import options as opt
 from . import plots
 from .driver import MixedControlError
-from .experiment import (DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test, bifurcation_domain,
-                         compile_kernels, probe_columns, state_at_eta)
+from .experiment import (DOMAIN_COLUMNS, DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test,
+                         bifurcation_domain, compile_kernels, probe_columns, state_at_eta)
 from .io import atomic_open, json_safe, write_csv, write_table
 from .options import add_param_options, params_from, record_params
 from .params import ParamError, save_params
 from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
 
+# where a loss of the static solution is made to happen dynamically
+BURST_POINTER = ("held past such a point the specimen cannot stay at rest: python -m hmodel burst "
+                 "makes this failure happen dynamically (docs/burst.md)")
 # memory of one step of a path [bytes]: run_path's histories (3 + 3 floats, 3 ints), the
 # PathResult rows (6 floats) and the CSV columns (12), all float64 / int64
 PATH_BYTES_PER_STEP = 8 * (3 + 3 + 3 + 6 + 12)
@@ -73,32 +76,57 @@ def cmd_biaxial(args, stage):
                               "(the volume V0 det(I - eps) vanishes at eps1 = 1)")
     stage.quiet = args.quiet
     t0 = _start(args, stage, f"drained biaxial test, sigma2 = {sigma2:g} Pa, to eps1 = {args.eps1_max:g}")
-    r = biaxial_test(P, sigma2, args.d_eps1, args.eps1_max, progress=not args.quiet)
+    note = f"python -m hmodel biaxial; {args.params_note}"
+    try:
+        r = biaxial_test(P, sigma2, args.d_eps1, args.eps1_max, progress=not args.quiet)
+    except BaseException as e:
+        # interrupted, or a Newton failure where a static state exists: the rows so far stay
+        part = getattr(e, "partial", None)
+        if part is not None:
+            os.makedirs(args.out, exist_ok=True)
+            write_csv(os.path.join(args.out, "biaxial.csv"), biaxial_columns(part))
+            stage.wrote(f"biaxial.csv ({len(part.eps) - 1} steps)", record_params(args.out, P, note))
+        raise
     cols = biaxial_columns(r)
     t_run = time.time() - t0
-    _say(stage, "writing biaxial.csv and Figs. 4-5")
+    end = r.end
+    _say(stage, "writing biaxial.csv, summary.json and Figs. 4-5")
     os.makedirs(args.out, exist_ok=True)
     write_csv(os.path.join(args.out, "biaxial.csv"), cols)
-    stage.wrote("biaxial.csv", record_params(args.out, P, f"python -m hmodel biaxial; {args.params_note}"))
+    stage.wrote("biaxial.csv", record_params(args.out, P, note))
+    cut = {int(k): int(r.cuts[k]) for k in np.flatnonzero(r.cuts)}
+    with atomic_open(os.path.join(args.out, "summary.json")) as f:
+        json.dump(json_safe({"parameters": args.params_note, "sigma2": sigma2,
+                             "outcome": end.outcome, "end": end.as_dict(), "steps": len(r.eps) - 1,
+                             "steps_cut": cut, "burst": BURST_POINTER}), f, indent=1)
+    stage.wrote("summary.json")
     k_pk = int(np.argmax(cols["q"]))
     hit = np.flatnonzero(cols["eta"] >= args.eta_a)
     a = (cols["eps1"][hit[0]], cols["q"][hit[0]], cols["eps_v"][hit[0]]) if hit.size else None
+    mark = (f"no static state beyond: {end.outcome} at {100 * cols['eps1'][-1]:.3f} %"
+            if end.outcome != "complete" else None)
     plots.fig_q_eps1([("H-model", cols["eps1"], cols["q"])], os.path.join(args.out, "fig4_q_eps1.png"),
                      point_a=a[:2] if a else None,
                      peak=(cols["eps1"][k_pk], cols["q"][k_pk]) if 0 < k_pk < len(cols["q"]) - 1 else None,
-                     title=f"H-model drained biaxial test, $\\sigma_2$ = {sigma2 / 1e3:g} kPa (Fig. 4)")
+                     title=f"H-model drained biaxial test, $\\sigma_2$ = {sigma2 / 1e3:g} kPa (Fig. 4)",
+                     end=(cols["eps1"][-1], cols["q"][-1], mark) if mark else None)
     stage.wrote("fig4_q_eps1.png")
     plots.fig_epsv_eps1([("H-model", cols["eps1"], cols["eps_v"])], os.path.join(args.out, "fig5_epsv_eps1.png"),
                         point_a=(a[0], a[2]) if a else None,
-                        title=f"H-model drained biaxial test, $\\sigma_2$ = {sigma2 / 1e3:g} kPa (Fig. 5)")
+                        title=f"H-model drained biaxial test, $\\sigma_2$ = {sigma2 / 1e3:g} kPa (Fig. 5)",
+                        end=(cols["eps1"][-1], cols["eps_v"][-1], mark) if mark else None)
     stage.wrote("fig5_epsv_eps1.png")
     print(args.params_note)
-    print(f"drained biaxial, sigma2 = {sigma2:g} Pa, {len(cols['eps1']) - 1} steps in {t_run:.2f} s")
+    print(f"drained biaxial, sigma2 = {sigma2:g} Pa, {len(cols['eps1']) - 1} steps in {t_run:.2f} s"
+          + (f" ({len(cut)} cut in substeps)" if cut else ""))
+    print(f"outcome: {end.line()}")
+    if end.outcome != "complete":
+        print(f"the path ends there (every computed row written); {BURST_POINTER}")
     print(f"peak: q = {cols['q'][k_pk]:.6g} Pa, eta = {cols['eta'][k_pk]:.4f} at eps1 = {cols['eps1'][k_pk]:.4%}")
     if a:
         print(f"point A (eta >= {args.eta_a}): eps1 = {a[0]:.4%}, q = {a[1]:.6g} Pa"
               f" ({'before' if hit[0] < k_pk else 'after'} the peak)")
-    print(f"wrote {args.out}/biaxial.csv, params.json, fig4_q_eps1.png, fig5_epsv_eps1.png")
+    print(f"wrote {args.out}/biaxial.csv, params.json, summary.json, fig4_q_eps1.png, fig5_epsv_eps1.png")
 
 
 def cmd_probes(args, stage):
@@ -127,7 +155,8 @@ def cmd_probes(args, stage):
     plots.fig_stress_components(sw, 0, pth("fig6_axial_components.png"))
     plots.fig_stress_components(sw, 1, pth("fig7_lateral_components.png"))
     plots.fig_polar_w2([("H-model W2", sw.alpha_sigma, sw.w2, "C3-")], pth("fig8_polar_w2.png"),
-                       title=f"Normalized second-order work at A ($\\eta$ = {args.eta}) (Fig. 8)")
+                       title=f"Normalized second-order work at A ($\\eta$ = {args.eta}) (Fig. 8)",
+                       no_solution=targets[sp.n_solutions == 0])
     plots.fig_w2_split(sw, pth("fig9_w2_split.png"))
     plots.fig_w2_normal_tangential(sw, pth("fig11_w2_normal_tangential.png"),
                                    title="H-model: normal and tangential parts of W2 (Fig. 11)")
@@ -398,11 +427,17 @@ def _arg(parse):
 
 
 def main(argv=None) -> int:
-    """``python -m hmodel ...``: 0 done, 1 not fittable (``fit``), 2 bad option (one line),
-    130 / 143 interrupted."""
+    """``python -m hmodel ...``: 0 done (also a path that ends without a static state: a
+    result), 1 not fittable (``fit``) or a Newton failure where a static state exists, 2 bad
+    option (one line), 130 / 143 interrupted."""
     def run(args, stage):
-        return args.func(args, stage) or 0
-    return opt.run_cli(build_parser(), argv, run, errors=(ValueError, MixedControlError))
+        try:
+            return args.func(args, stage) or 0
+        except MixedControlError as e:
+            # a static state exists but Newton did not reach it: a failure, not bad input
+            print(f"error: {e}", file=sys.stderr)
+            return 1
+    return opt.run_cli(build_parser(), argv, run, errors=(ValueError,))
 
 
 def cmd_domain(args, stage):
@@ -416,19 +451,35 @@ def cmd_domain(args, stage):
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
     t0 = _start(args, stage, f"bifurcation domain at sigma2 = {', '.join(f'{s:g}' for s in pressures)} Pa")
-    pts = bifurcation_domain(P, pressures, workers=args.workers, d_eps1=args.d_eps1,
-                             n_dir_probe=args.n, progress=lambda m: _say(stage, m))
+
+    def write_rows(pts):
+        os.makedirs(args.out, exist_ok=True)
+        cols = {k: np.array([getattr(d, k) for d in pts]) for k in DOMAIN_COLUMNS}
+        write_csv(os.path.join(args.out, "domain.csv"), cols)
+        stage.wrote(f"domain.csv ({len(pts)} of {len(pressures)} pressures)" if len(pts) < len(pressures)
+                    else "domain.csv", record_params(args.out, P, f"python -m hmodel domain; {note}"))
+
+    try:
+        pts = bifurcation_domain(P, pressures, workers=args.workers, d_eps1=args.d_eps1,
+                                 n_dir_probe=args.n, progress=lambda m: _say(stage, m))
+    except BaseException as e:
+        if getattr(e, "partial", None):     # interrupted: the pressures finished stay
+            write_rows(e.partial)
+        raise
     t_run = time.time() - t0
-    os.makedirs(args.out, exist_ok=True)
-    cols = {k: np.array([getattr(d, k) for d in pts]) for k in pts[0]._fields}
-    write_csv(os.path.join(args.out, "domain.csv"), cols)
-    stage.wrote("domain.csv", record_params(args.out, P, f"python -m hmodel domain; {note}"))
+    write_rows(pts)
+    with atomic_open(os.path.join(args.out, "summary.json")) as f:
+        json.dump(json_safe({"parameters": note, "paths": [
+            {"sigma2": d.sigma2, "outcome": d.outcome, "end": d.end or None} for d in pts]}), f, indent=1)
+    stage.wrote("summary.json")
     plots.fig_domain(pts, os.path.join(args.out, "fig10_domain.png"))
     print(note)
     for d in pts:
         print(f"sigma2 = {d.sigma2:g} Pa: first W2<=0 at (p, q) = ({d.p_w2:.4g}, {d.q_w2:.4g}), "
               f"W2_sigma<=0 at ({d.p_w2sigma:.4g}, {d.q_w2sigma:.4g}), peak ({d.p_peak:.4g}, {d.q_peak:.4g}) Pa")
-    print(f"wrote {args.out}/domain.csv, params.json, fig10_domain.png ({t_run:.1f} s)")
+        if d.outcome != "complete":
+            print(f"  the drained path at {d.sigma2:g} Pa ends {d.end}")
+    print(f"wrote {args.out}/domain.csv, params.json, summary.json, fig10_domain.png ({t_run:.1f} s)")
 
 
 def cmd_fit(args, stage):

@@ -7,6 +7,7 @@ tangent of the update (the stress of a step is exactly differentiable for a fixe
 """
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from dataclasses import dataclass
@@ -18,16 +19,23 @@ from . import _kernels
 from .material import (HState, reference_state, to_voigt, kernel_args, _material_args,
                        increment_from_outputs, check_state)
 from .params import HParams
+from .controllability import (PathEnd, Verdict, control_scan, decide, describe_control,
+                              stress_name)
 
 __all__ = [
-    "MixedControl", "PathResult", "MixedControlError", "mixed_step", "run_path",
+    "MixedControl", "PathResult", "MixedControlError", "mixed_step", "run_path", "MAX_CUTS",
     "isotropic_state", "drained_biaxial", "undrained_biaxial", "proportional_strain",
     "isotropic_compression", "stress_invariants", "proportional_strain_stress",
 ]
 
 
+# a step that does not converge is cut in halves down to 1 / 2**MAX_CUTS of itself (the floor)
+MAX_CUTS = 10
+
+
 class MixedControlError(RuntimeError):
-    """A mixed-control step whose Newton iterations did not converge."""
+    """A mixed-control step whose Newton iterations did not converge (in a path: a static
+    solution exists, ``controllability.decide`` found it, yet not within the tolerance)."""
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,10 @@ class PathResult(NamedTuple):
     n_sliding, n_open : (n+1,) number of sliding / open hexagons after each step.
     state : the final HState.
     states : list of the HState of every row when asked (keep_states=True), else None.
+    cuts : (n+1,) halvings of each step (0: the step converged whole; k: its smallest substep
+        was 1 / 2**k of it; row 0 and the steps of a path run without cuts: 0).
+    end : the ``controllability.PathEnd``: 'complete', or where and why no static state exists
+        under the control (the last row is then the last state reached, a step's fraction).
     """
 
     eps: np.ndarray
@@ -110,6 +122,8 @@ class PathResult(NamedTuple):
     n_open: np.ndarray
     state: HState
     states: list | None
+    cuts: np.ndarray | None = None
+    end: PathEnd | None = None
 
     def invariants(self):
         """(p, q, eta) arrays of the 2D invariants p = (s1+s2)/2, q = s1-s2, eta = q/p."""
@@ -131,13 +145,15 @@ def _tensor(v):
 
 
 def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_target,
-               guess=None, rtol: float = 1e-10, max_iter: int = 40):
+               guess=None, rtol: float = 1e-10, max_iter: int = 40, tol: float | None = None):
     """One mixed-control step of a single material point.
 
     sigma_target : (3,) stress [Pa] the stress-controlled variables must reach (with a
         ``control_matrix``: the conjugate stresses s' = A^-T sigma, e.g. c = s11 + R s22).
     guess : (3,) initial strain increment (11, 22, 12) (the strain-controlled variables are
         overwritten by the prescribed ones).
+    Newton stops at a stress residual <= ``tol`` [Pa], by default ``rtol`` x max(|target|,
+    1e-3 p0).
     Returns (Increment, d_eps (3,), iterations), d_eps the strain increment (11, 22, 12).
     Raises MixedControlError if Newton fails.
     """
@@ -149,8 +165,8 @@ def mixed_step(state: HState, params: HParams, control: MixedControl, sigma_targ
         de = A @ de
     de[sc] = np.asarray(control.d_eps)[sc]
     target = np.asarray(sigma_target, dtype=float)
-    scale = max(float(np.max(np.abs(target))), 1e-3 * params.p0)
-    tol = rtol * scale
+    if tol is None:
+        tol = rtol * max(float(np.max(np.abs(target))), 1e-3 * params.p0)
     args = kernel_args(state, params)
     out = _kernels.allocate_outputs(1, state.n_dir)
     it, rn, de_out = _kernels.mixed_step_single(
@@ -166,13 +182,14 @@ def _failure_message(code, max_iter, rn, tol):
         return (f"singular tangent on the stress-controlled components (no stiffness left, e.g. "
                 f"every hexagon open); stress residual {rn:.3e} Pa")
     return (f"mixed-control step did not converge in {max_iter} Newton iterations (last stress "
-            f"residual {rn:.3e} Pa, tolerance {tol:.3e} Pa); try a smaller step")
+            f"residual {rn:.3e} Pa, tolerance {tol:.3e} Pa)")
 
 
 def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int,
              until: Callable[[np.ndarray, np.ndarray], bool] | None = None,
              keep_states: bool = False, progress: bool = False, label: str = "path",
-             rtol: float = 1e-10, max_iter: int = 40, chunk: int = 250) -> PathResult:
+             rtol: float = 1e-10, max_iter: int = 40, chunk: int = 250,
+             max_cuts: int = MAX_CUTS) -> PathResult:
     """Run ``n_steps`` steps of ``control`` from ``state`` (a single point), or stop after the
     first step for which ``until(eps, sigma)`` is true (eps, sigma: (3,) arrays, eps counted
     from the start of the path).
@@ -180,23 +197,37 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
     Stress targets accumulate from the start stress: sigma_target = sigma_0 + k d_sigma (in the
     controlled variables: s'_0 + k d_sigma, s'_0 = A^-T sigma_0, with a control_matrix). The steps
     run in a Numba loop, ``chunk`` steps at a time (``until`` is checked between chunks and the
-    chunk is replayed up to the first step that satisfies it). A step whose Newton iterations do
-    not converge raises MixedControlError carrying the converged part as ``.partial``.
+    chunk is replayed up to the first step that satisfies it).
+
+    A step whose Newton iterations do not converge is cut in halves (``_Cutter``: the
+    substeps reach the step's own end, growing back x2 after each success; ``cuts`` records the
+    halvings per step) down to 1 / 2**``max_cuts`` of it. A substep of that floor that still
+    does not converge is decided by ``controllability.decide``: its root, where a static state
+    exists (the path goes on from it); else the path ends there, ``end`` saying why
+    ('uncontrollable': W2 = 0 for this control, the controlled block's determinant changing sign;
+    'discontinuous': the controlled stress jumps across its target), the last row being the
+    last state reached. A root that does not meet the tolerance raises MixedControlError
+    carrying the path so far as ``.partial`` (so does an interruption, KeyboardInterrupt).
     """
     if state.batch_shape != ():
         raise ValueError("run_path drives a single material point (batch shape ())")
     if int(n_steps) < 1:
         raise ValueError(f"n_steps must be >= 1, got {n_steps}")
+    if not (float(max_cuts) == int(max_cuts) and int(max_cuts) >= 0):
+        raise ValueError(f"max_cuts = {max_cuts!r} is out of range: allowed an integer >= 0")
     check_state(state, params)
     n_steps = int(n_steps)
-    if keep_states:
-        return _run_path_steps(state, params, control, n_steps, until, progress, label, rtol, max_iter)
     sig0 = to_voigt(state.stress)[0]
     general, A, Ainv = control.matrices()
     s0 = control.to_controlled(v_stress=sig0) if general else sig0
+    cut = _Cutter(params, control, s0, rtol, max_iter, int(max_cuts))
+    if keep_states:
+        cut.tol = None          # mixed_step's own tolerance, as the step-by-step loop always had
+        return _run_path_steps(state, params, control, n_steps, until, progress, label, cut)
     scale = max(float(np.max(np.abs(s0))), float(np.max(np.abs(s0 + n_steps * np.asarray(control.d_sigma)))),
                 1e-3 * params.p0)
     tol = rtol * scale
+    cut.tol = tol
     work = [a.copy() for a in kernel_args(state, params)[:-1]]
     sliding = np.ascontiguousarray(state.sliding, dtype=np.bool_).reshape(1, -1).copy()
     margs = _material_args(params)
@@ -205,98 +236,264 @@ def run_path(state: HState, params: HParams, control: MixedControl, n_steps: int
     d_sig = np.asarray(control.d_sigma, dtype=float)
     h_de = np.zeros((n_steps, 3)); h_sig = np.zeros((n_steps, 3))
     h_it = np.zeros(n_steps, dtype=np.int64); h_nsl = np.zeros(n_steps, dtype=np.int64)
-    h_nop = np.zeros(n_steps, dtype=np.int64)
+    h_nop = np.zeros(n_steps, dtype=np.int64); h_cut = np.zeros(n_steps, dtype=np.int64)
     guess = np.zeros(3)
-    done = 0
+    done = have = 0
     bar = _Progress(n_steps, label) if progress else None
-    failed = None
-    while done < n_steps:
-        m = min(int(chunk), n_steps - done)
-        saved = [a.copy() for a in work] + [sliding.copy()]
-        sl = slice(done, done + m)
-        n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, s0, d_sig, done, m, guess, tol,
-                                     int(max_iter), h_de[sl], h_sig[sl], h_it[sl], h_nsl[sl],
-                                     h_nop[sl], sliding, general, A, Ainv)
-        stop_at = None
-        if until is not None and n > 0:
-            eps_rows = np.cumsum(h_de[:done + n], axis=0)[done:]
-            for j in range(n):
-                if until(eps_rows[j], h_sig[done + j]):
-                    stop_at = j
+    end = None
+
+    def result(rows):
+        return _path_result(state, work, sliding, sig0, h_de[:rows], h_sig[:rows], h_it[:rows],
+                            h_nsl[:rows], h_nop[:rows], h_cut[:rows], control, end)
+
+    try:
+        while done < n_steps:
+            m = min(int(chunk), n_steps - done)
+            saved = [a.copy() for a in work] + [sliding.copy()]
+            sl = slice(done, done + m)
+            n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, s0, d_sig, done, m, guess, tol,
+                                         int(max_iter), h_de[sl], h_sig[sl], h_it[sl], h_nsl[sl],
+                                         h_nop[sl], sliding, general, A, Ainv)
+            have = done + n                    # the rows the state in ``work`` has reached
+            stop_at = None
+            if until is not None and n > 0:
+                eps_rows = np.cumsum(h_de[:done + n], axis=0)[done:]
+                for j in range(n):
+                    if until(eps_rows[j], h_sig[done + j]):
+                        stop_at = j
+                        break
+            if stop_at is not None and stop_at + 1 < n:
+                work = saved[:-1]
+                sliding = saved[-1]
+                have = done
+                n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, s0, d_sig, done, stop_at + 1,
+                                             guess, tol, int(max_iter), h_de[sl], h_sig[sl], h_it[sl],
+                                             h_nsl[sl], h_nop[sl], sliding, general, A, Ainv)
+            have = done + n
+            if n > 0:
+                guess = h_de[done + n - 1].copy()
+            done += n
+            if bar is not None:
+                bar.update(done)
+            if stop_at is not None:
+                break
+            if n < m:
+                # step done + 1 did not converge whole: its substeps from the state in ``work``
+                here = _state_from_work(state, work, sliding, h_sig[done - 1] if done else sig0)
+                c = cut.step(here, done + 1, guess)
+                h_de[done], h_sig[done], h_it[done] = c.de, c.sigma, c.iterations
+                h_cut[done] = c.cuts
+                if c.end is not None or c.fraction > 0:
+                    h_nsl[done] = int(c.state.sliding.sum())
+                    h_nop[done] = int(c.state.is_open.sum())
+                    work = [a.copy() for a in kernel_args(c.state, params)[:-1]]
+                    sliding = np.ascontiguousarray(c.state.sliding, dtype=np.bool_).reshape(1, -1).copy()
+                    have = done + (1 if c.fraction > 0 else 0)
+                if c.end is not None:
+                    end = (c.end, done + 1, c.fraction)
+                    done += 1 if c.fraction > 0 else 0
                     break
-        if stop_at is not None and stop_at + 1 < n:
-            work = saved[:-1]
-            sliding = saved[-1]
-            n, rn, code = _kernels.path_single(*work, *margs, sc, d_eps, s0, d_sig, done, stop_at + 1,
-                                         guess, tol, int(max_iter), h_de[sl], h_sig[sl], h_it[sl],
-                                         h_nsl[sl], h_nop[sl], sliding, general, A, Ainv)
-        if n > 0:
-            guess = h_de[done + n - 1].copy()
-        done += n
+                guess = c.de.copy()
+                done += 1
+                if bar is not None:
+                    bar.update(done)
+                if until is not None and until(np.cumsum(h_de[:done], axis=0)[-1], h_sig[done - 1]):
+                    break
+    except BaseException as e:
+        if not hasattr(e, "partial"):
+            e.partial = result(have)
+        raise
+    finally:
         if bar is not None:
-            bar.update(done)
-        if n < m and stop_at is None:
-            failed = (done + 1, rn, code)
-            break
-        if stop_at is not None:
-            break
-    if bar is not None:
-        bar.close()
-    result = _path_result(state, work, sliding, sig0, h_de[:done], h_sig[:done], h_it[:done],
-                          h_nsl[:done], h_nop[:done])
-    if failed is not None:
-        err = MixedControlError(f"{label}, step {failed[0]}: "
-                                + _failure_message(failed[2], max_iter, failed[1], tol))
-        err.partial = result
-        raise err
-    return result
+            bar.close()
+    return result(done)
 
 
-def _path_result(state, work, sliding, sig0, h_de, h_sig, h_it, h_nsl, h_nop) -> PathResult:
+class _Cut(NamedTuple):
+    """One step by substeps (``_Cutter.step``): the state reached, its stress (3,), the strain
+    increment (3,) and Newton iterations of the substeps together, the halvings, the fraction
+    of the step reached, and the end (None, or the ``Verdict`` that ended the path)."""
+
+    state: HState
+    sigma: np.ndarray
+    de: np.ndarray
+    iterations: int
+    cuts: int
+    fraction: float
+    end: object
+
+
+class _Cutter:
+    """The substeps of a step that did not converge whole (MTest's substepping): halves, then
+    growing back x2 after each success, within the step's own end; at the floor
+    1 / 2**max_cuts the decision of ``controllability.decide``."""
+
+    def __init__(self, params, control, s0, rtol, max_iter, max_cuts):
+        self.params, self.control, self.s0 = params, control, np.asarray(s0, float)
+        self.rtol, self.max_iter, self.max_cuts = rtol, int(max_iter), int(max_cuts)
+        self.tol = None
+        self.d_eps = np.asarray(control.d_eps, float)
+        self.d_sig = np.asarray(control.d_sigma, float)
+
+    def target(self, k, f):
+        """The controlled stresses at fraction f of step k (1-based): s0 + (k - 1 + f) d_sigma."""
+        return self.s0 + (k - 1 + f) * self.d_sig
+
+    def step(self, state: HState, k: int, guess) -> _Cut:
+        """Step k (1-based) from ``state``, whose whole did not converge, in substeps; ``guess``
+        the previous step's strain increment (the substeps' guesses scale it)."""
+        rate = np.asarray(guess, float)         # strain increment per unit fraction of the step
+        sig = to_voigt(state.stress)[0]
+        floor = 0.5 ** self.max_cuts
+        h, depth = (0.5, 1) if self.max_cuts > 0 else (1.0, 0)     # (without cuts: decide at once)
+        frac, its, de_sum = 0.0, 0, np.zeros(3)
+        while frac < 1.0:
+            h = min(h, 1.0 - frac)
+            tgt = self.target(k, frac + h)
+            got = self._attempt(state, h, tgt, rate) if h < 1.0 else None
+            if got is None and h * 0.5 >= floor:
+                h *= 0.5
+                depth = max(depth, int(round(-np.log2(h))))
+                continue
+            if got is None:
+                got = self._decide(state, k, h, tgt)
+                if isinstance(got, Verdict):            # no static state: the path ends here
+                    return _Cut(state, sig, de_sum, its, depth, frac, got)
+            inc, de, it = got
+            state = inc.state
+            sig = to_voigt(inc.stress)[0]
+            de_sum = de_sum + de
+            its += it
+            rate = de / h
+            frac += h
+            h *= 2.0
+        return _Cut(state, sig, de_sum, its, depth, 1.0, None)
+
+    def _attempt(self, state, h, tgt, rate):
+        """The substep of fraction h by Newton: (Increment, d_eps, iterations), or None."""
+        ctl = dataclasses.replace(self.control, d_eps=tuple(h * self.d_eps))
+        try:
+            return mixed_step(state, self.params, ctl, tgt, guess=h * rate, rtol=self.rtol,
+                              max_iter=self.max_iter, tol=self.tol)
+        except MixedControlError:
+            return None
+
+    def _decide(self, state, k, h, tgt):
+        """The substep of fraction h at the floor: ``controllability.decide``'s root as
+        (Increment, d_eps, iterations), or its Verdict when no static state exists; raises
+        MixedControlError when it can neither find nor exclude one."""
+        params, control = self.params, self.control
+        tol = self.tol if self.tol is not None else \
+            self.rtol * max(float(np.max(np.abs(tgt))), 1e-3 * params.p0)
+        de_p = h * self.d_eps                        # the controlled variables of the substep
+        v = decide(state, params, control, tgt, de_p, tol)
+        if v.outcome in ("uncontrollable", "discontinuous"):
+            return v
+        if v.outcome == "unresolved":
+            raise MixedControlError(
+                f"step {k}: no static state found and none excluded: the controlled stress comes "
+                f"closest to its target ({v.reached:.6g} of {v.target:.6g} Pa) at the end of the "
+                f"largest bracket |d e'| <= {v.bracket:g}")
+        if v.residual > tol:
+            raise MixedControlError(
+                f"step {k}: a static state exists (the controlled stress reaches its target "
+                f"continuously at d e'{v.variable + 1} = {v.at:.6g}) but not within the "
+                f"tolerance: residual {v.residual:.3e} Pa > {tol:.3e} Pa")
+        # the scan's root: the static state of this substep, every strain now known
+        ep = np.asarray(de_p, float).copy()
+        ep[v.variable] = v.at
+        de = control_scan(state, params, control, ep, tgt, [v.at], v.variable)[2][0]
+        return mixed_step(state, params, MixedControl((True, True, True), tuple(de)), tgt)
+
+
+def _state_from_work(state, work, sliding, sig) -> HState:
+    """The HState of the kernel's work arrays (the state of a path in its Numba loop)."""
     n = state.n_dir
     d1, d2, al, N1, T1, N2, l1, l2, ca, sa, was_open, eps, V0 = work
+    return HState(d1=d1.reshape(n).copy(), d2=d2.reshape(n).copy(), alpha=al.reshape(n).copy(),
+                  N1=N1.reshape(n).copy(), T1=T1.reshape(n).copy(), N2=N2.reshape(n).copy(),
+                  l1=l1.reshape(n).copy(), l2=l2.reshape(n).copy(),
+                  cos_alpha=ca.reshape(n).copy(), sin_alpha=sa.reshape(n).copy(),
+                  eps=_tensor(eps[0]), stress=_tensor(sig), V0=np.array(float(V0[0])),
+                  sliding=sliding.reshape(n).copy(), is_open=was_open.reshape(n).copy(),
+                  params_key=state.params_key)
+
+
+def _path_result(state, work, sliding, sig0, h_de, h_sig, h_it, h_nsl, h_nop, h_cut, control,
+                 end) -> PathResult:
     last_sig = h_sig[-1] if len(h_sig) else sig0
-    final = HState(d1=d1.reshape(n), d2=d2.reshape(n), alpha=al.reshape(n), N1=N1.reshape(n),
-                   T1=T1.reshape(n), N2=N2.reshape(n), l1=l1.reshape(n), l2=l2.reshape(n),
-                   cos_alpha=ca.reshape(n), sin_alpha=sa.reshape(n),
-                   eps=_tensor(eps[0]), stress=_tensor(last_sig), V0=np.array(float(V0[0])),
-                   sliding=sliding.reshape(n).copy(), is_open=was_open.reshape(n).copy(),
-                   params_key=state.params_key)
+    final = _state_from_work(state, work, sliding, last_sig)
+    eps = np.vstack([np.zeros(3), np.cumsum(h_de, axis=0)])
+    sigma = np.vstack([sig0, h_sig])
+    pe = PathEnd("complete", 0, 1.0, eps[-1].copy(), sigma[-1].copy(), describe_control(control),
+                 None)
+    if end is not None:
+        v, k, f = end
+        pe = pe._replace(outcome=v.outcome, step=k, fraction=f, verdict=v,
+                         stress=stress_name(control, v.variable))
     return PathResult(
-        eps=np.vstack([np.zeros(3), np.cumsum(h_de, axis=0)]), sigma=np.vstack([sig0, h_sig]),
+        eps=eps, sigma=sigma,
         newton_iters=np.concatenate([[0], h_it]),
         n_sliding=np.concatenate([[int(state.sliding.sum())], h_nsl]),
-        n_open=np.concatenate([[int(state.is_open.sum())], h_nop]), state=final, states=None)
+        n_open=np.concatenate([[int(state.is_open.sum())], h_nop]), state=final, states=None,
+        cuts=np.concatenate([[0], h_cut]), end=pe)
 
 
-def _run_path_steps(state, params, control, n_steps, until, progress, label, rtol, max_iter):
+def _run_path_steps(state, params, control, n_steps, until, progress, label, cut):
     """The step-by-step Python loop of run_path, keeping every state."""
     sig0 = to_voigt(state.stress)[0]
     s0 = control.to_controlled(v_stress=sig0) if control.control_matrix is not None else sig0
     dsig = np.asarray(control.d_sigma)
     eps_hist, sig_hist, iters = [np.zeros(3)], [sig0.copy()], [0]
-    nsl, nop = [int(state.sliding.sum())], [int(state.is_open.sum())]
+    nsl, nop, cuts = [int(state.sliding.sum())], [int(state.is_open.sum())], [0]
     states = [state]
     eps = np.zeros(3)
     guess = np.zeros(3)
     bar = _Progress(n_steps, label) if progress else None
-    for k in range(1, n_steps + 1):
-        inc, de, it = mixed_step(state, params, control, s0 + k * dsig, guess=guess, rtol=rtol,
-                                 max_iter=max_iter)
-        state, guess = inc.state, de
-        eps = eps + de
-        sig = to_voigt(inc.stress)[0]
-        eps_hist.append(eps.copy()); sig_hist.append(sig); iters.append(it)
-        nsl.append(int(state.sliding.sum())); nop.append(int(state.is_open.sum()))
-        states.append(state)
+    end = None
+
+    def result():
+        pe = PathEnd("complete", 0, 1.0, eps_hist[-1].copy(), sig_hist[-1].copy(),
+                     describe_control(control), None)
+        if end is not None:
+            v, k, f = end
+            pe = pe._replace(outcome=v.outcome, step=k, fraction=f, verdict=v,
+                         stress=stress_name(control, v.variable))
+        return PathResult(eps=np.array(eps_hist), sigma=np.array(sig_hist),
+                          newton_iters=np.array(iters), n_sliding=np.array(nsl),
+                          n_open=np.array(nop), state=states[-1], states=states,
+                          cuts=np.array(cuts), end=pe)
+
+    try:
+        for k in range(1, n_steps + 1):
+            try:
+                inc, de, it = mixed_step(state, params, control, s0 + k * dsig, guess=guess,
+                                         rtol=cut.rtol, max_iter=cut.max_iter)
+                c = _Cut(inc.state, to_voigt(inc.stress)[0], de, it, 0, 1.0, None)
+            except MixedControlError:
+                c = cut.step(state, k, guess)
+            if c.fraction > 0:
+                state, guess = c.state, c.de
+                eps = eps + c.de
+                eps_hist.append(eps.copy()); sig_hist.append(c.sigma); iters.append(c.iterations)
+                nsl.append(int(state.sliding.sum())); nop.append(int(state.is_open.sum()))
+                cuts.append(c.cuts)
+                states.append(state)
+            if c.end is not None:
+                end = (c.end, k, c.fraction)
+                break
+            if bar is not None:
+                bar.update(k)
+            if until is not None and until(eps, c.sigma):
+                break
+    except BaseException as e:
+        if not hasattr(e, "partial"):
+            e.partial = result()
+        raise
+    finally:
         if bar is not None:
-            bar.update(k)
-        if until is not None and until(eps, sig):
-            break
-    if bar is not None:
-        bar.close()
-    return PathResult(eps=np.array(eps_hist), sigma=np.array(sig_hist), newton_iters=np.array(iters),
-                      n_sliding=np.array(nsl), n_open=np.array(nop), state=state, states=states)
+            bar.close()
+    return result()
 
 
 class _Progress:
@@ -336,8 +533,17 @@ def isotropic_compression(params: HParams, p_target: float, state: HState | None
 
 def isotropic_state(params: HParams, p0: float | None = None) -> HState:
     """The isotropic initial state of spec/hmodel.md: from d1 = d2 = 2 r_g, alpha = alpha0,
-    compressed isotropically to p0 (default ``params.p0``); strains of a test count from it."""
-    return isotropic_compression(params, params.p0 if p0 is None else p0).state
+    compressed isotropically to p0 (default ``params.p0``); strains of a test count from it.
+    Raises MixedControlError (``.partial`` None) when the compression has no static state on
+    its way to p0 (``PathResult.end``)."""
+    p0 = params.p0 if p0 is None else p0
+    r = isotropic_compression(params, p0)
+    if r.end.outcome != "complete":
+        e = MixedControlError(f"no isotropic state at p0 = {p0:g} Pa: the isotropic compression "
+                              f"ends {r.end.line()}")
+        e.partial = None
+        raise e
+    return r.state
 
 
 def _check_step(d, name="d_eps1"):

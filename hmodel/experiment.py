@@ -17,6 +17,7 @@ from .params import HParams
 from .probes import ProbeResult, w2_vanishes
 
 __all__ = ["biaxial_test", "state_at_eta", "biaxial_columns", "probe_columns", "DomainPoint",
+           "DOMAIN_COLUMNS",
            "domain_point", "bifurcation_domain", "compile_kernels", "DOMAIN_EPS1_MAX"]
 
 # the axial strain where the searches for point A and for the domain boundaries give up [-]
@@ -72,8 +73,12 @@ def biaxial_test(params: HParams, sigma2: float | None = None, d_eps1: float = 1
         raise ValueError(f"d_eps1 must be in (0, eps1_max = {eps1_max}], got {d_eps1!r}")
     p = params.replace(p0=sigma2)
     n = int(round(eps1_max / d_eps1))
-    return run_path(isotropic_state(p), p, drained_biaxial(d_eps1), n, progress=progress,
-                    label="drained biaxial")
+    try:
+        s0 = isotropic_state(p)
+    except BaseException as e:
+        e.partial = None          # the compression's rows are not the test's (interrupted there)
+        raise
+    return run_path(s0, p, drained_biaxial(d_eps1), n, progress=progress, label="drained biaxial")
 
 
 def state_at_eta(params: HParams, eta: float, sigma2: float | None = None, d_eps1: float = 1e-5,
@@ -91,7 +96,8 @@ def state_at_eta(params: HParams, eta: float, sigma2: float | None = None, d_eps
                  until=lambda e, s: (s[0] - s[1]) >= eta * 0.5 * (s[0] + s[1]))
     _, _, e = r.invariants()
     if e[-1] < eta:
-        raise ValueError(f"eta = {eta} is never reached on the drained path (max eta {e.max():.4f})")
+        why = "" if r.end.outcome == "complete" else f"; the path ends {r.end.line()}"
+        raise ValueError(f"eta = {eta} is never reached on the drained path (max eta {e.max():.4f}{why})")
     return r, r.state
 
 
@@ -119,7 +125,9 @@ def probe_columns(pr: ProbeResult) -> dict:
 class DomainPoint(NamedTuple):
     """Bifurcation domain at one confining pressure (Fig. 10): (p, q) [Pa] of the first state of
     the drained path with W2 <= 0 in some direction, the same for W2_sigma, and the peak.
-    NaN where the criterion never fires before the peak."""
+    NaN where the criterion never fires before the peak (or before the path ends). ``outcome``:
+    'complete', or how the drained path ended before the domain was found (``PathResult.end``:
+    'uncontrollable', 'discontinuous'), ``end`` its line, (p_end, q_end) [Pa] its last state."""
 
     sigma2: float
     p_w2: float
@@ -131,6 +139,14 @@ class DomainPoint(NamedTuple):
     eps1_w2: float
     eps1_w2sigma: float
     eps1_peak: float
+    outcome: str = "complete"
+    end: str = ""
+    p_end: float = np.nan
+    q_end: float = np.nan
+
+
+# the columns of domain.csv (``outcome`` and ``end`` say how each drained path ended: summary.json)
+DOMAIN_COLUMNS = DomainPoint._fields[:10]
 
 
 def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_every: int = 25,
@@ -171,8 +187,11 @@ def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_eve
             out[key] = hi
         return out
 
+    ended = None
     while steps < n_max and (peak is None or any(v is None for v in found.values())):
         r = run_path(state, p, ctl, check_every)
+        if r.end.outcome != "complete":
+            ended = r.end          # no static state beyond this block's last row
         pp, qq, _ = r.invariants()
         # the peak: first row where q stops increasing
         for j in range(1, len(qq)):
@@ -191,12 +210,16 @@ def domain_point(params: HParams, sigma2: float, d_eps1: float = 1e-5, check_eve
         eps1 += r.eps[-1, 0]
         steps += check_every
         state = r.state
-        if peak is not None and all(v is not None for v in found.values()):
+        if ended is not None or (peak is not None and all(v is not None for v in found.values())):
             break
     nan3 = (np.nan, np.nan, np.nan)
     w, ws, pk = found["w2"] or nan3, found["w2_sigma"] or nan3, peak or nan3
+    end = (("complete", "") if ended is None else
+           (ended.outcome, ended.line(), 0.5 * (ended.sigma[0] + ended.sigma[1]),
+            ended.sigma[0] - ended.sigma[1]))
     # a criterion that fires only after the peak is outside the pre-peak domain: keep it anyway
-    return DomainPoint(float(sigma2), w[0], w[1], ws[0], ws[1], pk[0], pk[1], w[2], ws[2], pk[2])
+    return DomainPoint(float(sigma2), w[0], w[1], ws[0], ws[1], pk[0], pk[1], w[2], ws[2], pk[2],
+                       *end)
 
 
 def _domain_job(args):
@@ -220,7 +243,8 @@ def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
                        progress=None, **kw) -> list[DomainPoint]:
     """``domain_point`` for every confining pressure, in parallel processes (``workers`` >= 1,
     default min(len, cpu count); 1 runs in this process). Results in the input order.
-    ``progress``: None or a callable taking one line of text, called as each pressure is done."""
+    ``progress``: None or a callable taking one line of text, called as each pressure is done.
+    Interrupted (or failed), the exception carries the pressures finished as ``.partial``."""
     sig = [float(s) for s in sigma2_list]
     for s in sig:
         _check_sigma2(s)
@@ -239,8 +263,12 @@ def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
                      f"{time.perf_counter() - t0:.1f} s)")
 
     if workers <= 1 or len(sig) == 1:
-        for k, j in enumerate(jobs):
-            done(k, _domain_job(j))
+        try:
+            for k, j in enumerate(jobs):
+                done(k, _domain_job(j))
+        except BaseException as e:
+            e.partial = [o for o in out if o is not None]     # the pressures finished, in order
+            raise
         return out
     # spawn, not fork: a fork after Numba's parallel kernel has started its threads can crash
     ex = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), initializer=_domain_worker_init,
@@ -249,10 +277,11 @@ def bifurcation_domain(params: HParams, sigma2_list, workers: int | None = None,
         futures = {ex.submit(_domain_job, j): k for k, j in enumerate(jobs)}
         for f in as_completed(futures):
             done(futures[f], f.result())
-    except BaseException:
+    except BaseException as e:
         # interrupted or failed: stop the workers now rather than after their current pressure
         for proc in list((getattr(ex, "_processes", None) or {}).values()):
             proc.terminate()
+        e.partial = [o for o in out if o is not None]
         raise
     finally:
         ex.shutdown(wait=True, cancel_futures=True)

@@ -337,17 +337,22 @@ def model_curve(params: HParams, eps1, d_eps1: float):
     """The H-model's drained curve at sigma2 = ``params.p0`` at the axial strains ``eps1`` (m,):
     (q [Pa], eps_v [-], eps1_fail). The path runs in steps ``d_eps1`` from the isotropic state
     to the last of ``eps1`` and is interpolated linearly. ``eps1_fail`` is NaN, or the axial
-    strain where the path failed (no drained equilibrium: hexagons open and the lateral stress
-    cannot be held); beyond it the model has no strength, q = 0 and eps_v stays at its last
-    value, so that the search moves away from such parameters."""
+    strain where the path ended before the data's last strain: no static state under the drained
+    control there (``PathResult.end``: 'uncontrollable' or 'discontinuous', e.g. hexagons
+    opening early with alpha0 > 90 deg - phi_g), or a Newton failure the driver could not
+    resolve, or no isotropic state at p0 at all (0). The penalty (docs/fit.md): beyond it the
+    model has no strength, q = 0, and eps_v stays at its last value, so that every data point
+    beyond costs its own q (relative residual q_data / max q) and the search moves away."""
     eps1 = np.asarray(eps1, dtype=float)
     n = max(1, int(math.ceil(eps1[-1] / d_eps1 - 1e-9)))
     fail = math.nan
     try:
         r = biaxial_test(params, params.p0, d_eps1, n * d_eps1)
+        if r.end.outcome != "complete":
+            fail = float(r.eps[-1, 0])
     except MixedControlError as e:
         r = getattr(e, "partial", None)
-        if r is None:         # the isotropic compression itself failed
+        if r is None:                  # no isotropic state at p0 (driver.isotropic_state)
             return np.zeros_like(eps1), np.zeros_like(eps1), 0.0
         fail = float(r.eps[-1, 0])
     e1 = r.eps[:, 0]

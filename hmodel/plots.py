@@ -24,9 +24,10 @@ def _mark(ax, x, y, label="A", marker="o", color="C3", offset=(6, -12)):
     ax.annotate(label, (x, y), textcoords="offset points", xytext=offset, color=color)
 
 
-def _strain_curves(curves, path, point_a, title, yscale, ylabel, peak=None):
+def _strain_curves(curves, path, point_a, title, yscale, ylabel, peak=None, end=None):
     """One quantity (scaled by ``yscale``) of drained-test curves against eps1 [%]; ``point_a``
-    and ``peak``: None or (eps1 [-], value) to mark."""
+    and ``peak``: None or (eps1 [-], value) to mark; ``end``: None or (eps1 [-], value, label):
+    where the path ended without a static state (``PathResult.end``)."""
     fig, ax = plt.subplots(figsize=(6, 4.2))
     for label, e1, y in curves:
         ax.plot(100 * np.asarray(e1), yscale * np.asarray(y), label=label)
@@ -35,6 +36,9 @@ def _strain_curves(curves, path, point_a, title, yscale, ylabel, peak=None):
     if peak is not None:
         _mark(ax, 100 * peak[0], yscale * peak[1], label=f"peak ({100 * peak[0]:.2f} %)",
               marker="v", color="k", offset=(8, -16))
+    if end is not None:
+        _mark(ax, 100 * end[0], yscale * end[1], label=end[2], marker="X", color="C1",
+              offset=(-150, 10))
     ax.set_xlabel(r"axial strain $\varepsilon_1$ [%]")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -44,17 +48,22 @@ def _strain_curves(curves, path, point_a, title, yscale, ylabel, peak=None):
     save_figure(fig, path)
 
 
-def fig_q_eps1(curves, path, point_a=None, title="Drained biaxial test: deviatoric stress", peak=None):
+def fig_q_eps1(curves, path, point_a=None, title="Drained biaxial test: deviatoric stress", peak=None,
+               end=None):
     """Fig. 4 / 13: q = s1 - s2 [kPa] against eps1 [%]. ``curves``: list of (label, eps1, q);
-    ``point_a``, ``peak``: None or (eps1 [-], q [Pa]) marked on the figure."""
+    ``point_a``, ``peak``: None or (eps1 [-], q [Pa]) marked on the figure; ``end``: None or
+    (eps1 [-], q [Pa], label), the end of a path without a static state beyond."""
     _strain_curves(curves, path, point_a, title, 1e-3,
-                   r"deviatoric stress $q = \sigma_1 - \sigma_2$ [kPa]", peak=peak)
+                   r"deviatoric stress $q = \sigma_1 - \sigma_2$ [kPa]", peak=peak, end=end)
 
 
-def fig_epsv_eps1(curves, path, point_a=None, title="Drained biaxial test: volumetric strain"):
-    """Fig. 5 / 14: eps_v = eps1 + eps2 [%] (compression positive) against eps1 [%]."""
+def fig_epsv_eps1(curves, path, point_a=None, title="Drained biaxial test: volumetric strain",
+                  end=None):
+    """Fig. 5 / 14: eps_v = eps1 + eps2 [%] (compression positive) against eps1 [%]; ``end`` as
+    ``fig_q_eps1`` (eps_v for the value)."""
     _strain_curves(curves, path, point_a, title, 100.0,
-                   r"volumetric strain $\varepsilon_v = \varepsilon_1 + \varepsilon_2$ [%] (contraction > 0)")
+                   r"volumetric strain $\varepsilon_v = \varepsilon_1 + \varepsilon_2$ [%] (contraction > 0)",
+                   end=end)
 
 
 def fig_probes(pr, path):
@@ -139,14 +148,20 @@ def _polar_xy(alpha_deg, w):
     return r * np.cos(a), r * np.sin(a)
 
 
-def fig_polar_w2(series, path, title="Normalized second-order work"):
+def fig_polar_w2(series, path, title="Normalized second-order work", no_solution=None):
     """Fig. 8 / 15 / 16: polar diagram, point at angle alpha_sigma and radius 0.5 + W2.
-    ``series``: list of (label, alpha_sigma [deg], w2, style)."""
+    ``series``: list of (label, alpha_sigma [deg], w2, style). ``no_solution``: stress
+    directions alpha_sigma [deg] whose stress probe has no static solution (no strain increment
+    gives them: ``probes.stress_probes``), marked on the circle W2 = 0."""
     fig, ax = plt.subplots(figsize=(6, 6))
     polar_axes(ax, rmax=max(1.6, 0.6 + max(np.nanmax(s[2]) for s in series)))
     for label, a, w, style in series:
         x, y = _polar_xy(a, w)
         ax.plot(x, y, style, label=label, lw=1.2, ms=3)
+    if no_solution is not None and len(no_solution):
+        t = np.radians(np.asarray(no_solution, float))
+        ax.plot(0.5 * np.cos(t), 0.5 * np.sin(t), "x", color="C1", ms=7, mew=1.5,
+                label=f"stress probe without a static solution ({len(t)})")
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title(title)
     save_figure(fig, path)
@@ -206,13 +221,18 @@ def fig_w2_normal_tangential(pr, path, title="Micro second-order work: normal an
 def fig_domain(points, path):
     """Fig. 10: bifurcation domain in (p, q) [kPa]: lower boundaries from the first W2 <= 0 and
     first W2_sigma <= 0 on drained paths, upper boundary the peak (plastic limit)."""
-    P = {k: np.array([getattr(d, k) for d in points]) / 1e3 for k in points[0]._fields}
+    P = {k: np.array([getattr(d, k) for d in points]) / 1e3 for k in points[0]._fields
+         if k not in ("outcome", "end")}
     fig, ax = plt.subplots(figsize=(6, 4.6))
     ax.plot(P["p_peak"], P["q_peak"], "k-o", label="plastic limit (peak)")
     ax.plot(P["p_w2"], P["q_w2"], "C3-s", label=r"first $W_2 \leq 0$")
     ax.plot(P["p_w2sigma"], P["q_w2sigma"], "C0--^", label=r"first $W_2^\sigma \leq 0$")
     for k in range(len(points)):
         ax.plot([P["sigma2"][k], P["p_peak"][k]], [0, P["q_peak"][k]], ":", color="0.6", lw=0.8)
+    ended = [k for k, d in enumerate(points) if d.outcome != "complete"]
+    if ended:
+        ax.plot(P["p_end"][ended], P["q_end"][ended], "X", color="C1", ms=9,
+                label="drained path ends: no static state beyond")
     ax.set_xlabel("mean stress p = (s1 + s2)/2 [kPa]")
     ax.set_ylabel("deviatoric stress q = s1 - s2 [kPa]")
     ax.set_xlim(left=0)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from dem import io
+from dem.anatomy import ANATOMY_COLUMNS
 from dem.burst import BURST_COLUMNS, HISTORY_COLUMNS, PATH_COLUMNS
 from dem.settle import OUTCOMES
 
@@ -76,8 +77,16 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     assert load_params(out / "params.json") == DemParams.from_dict(s["params"])
     assert load_params(out / "params.json") == load_params(biaxial_300 / "params.json")
     for fig in ("fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png",
-                "fig_burst_ledger.png"):
+                "fig_burst_ledger.png", "fig_burst_anatomy.png"):
         assert (out / fig).stat().st_size > 10_000
+    # the anatomy at every check of the holds, and VTU files at the end of both runs (and at the
+    # onset of the past run's burst): the past run ends with unstable contacts in clusters
+    assert set(ANATOMY_COLUMNS) <= set(io.read_csv(out / "history.csv")[0])
+    import meshio
+    for kind in ("disks", "contacts"):
+        for sw in ("below", "past"):
+            assert meshio.read(out / "anatomy" / f"{kind}_R-2_f0.9_{sw}_end.vtu").points.size
+        assert (out / "anatomy" / f"{kind}_R-2_f0.9_past_onset.vtu").exists()
     assert "burst: " in capsys.readouterr().out
     # from rest: the path's start and loaded peak relaxed at fixed strain (rest.csv: c at rest
     # below the loaded c), the staircase of holds (stairs.csv), each switch held by a dead load
@@ -99,6 +108,8 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
         assert past["outcome"] == "failure" and past["dc"] == 100.0
         assert past["c_peak"] == past["c_switch"] and past["c_rest"] == past["c_switch"]
         assert past["w2_int_end"] < 0 and past["ke_growth"] >= 1e3
+        end = [x for x in hist if x["switch"] == "past"][-1]
+        assert end["n_unstable"] > 0 and end["largest_cluster"] >= 1
     # only the states the switches started from are kept
     assert sorted(p.name for p in (out / "rest").iterdir()) == sorted(
         f"R-2_f0.9_{r['switch']}.npz" for r in runs)
@@ -144,6 +155,7 @@ def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, 
     assert len(io.read_csv(out / "stairs.csv")[1]) == 5
     main(args)                                                # the same, uninterrupted
     assert [(out / f).read_bytes() for f in ("stairs.csv", "rest.csv", "burst.csv")] == resumed
+    capsys.readouterr()
     code, err = _run(args + ["--resume", "--dc", "200"], capsys)
     assert code == 2 and len(err) == 1 and "--resume" in err[0], err
 

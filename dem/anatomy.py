@@ -341,7 +341,12 @@ def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState):
     i, j, grain = split_keys(ow.keys, n)
     now = np.searchsorted(s.keys, ow.keys[grain])
     present = ow.present[grain]
-    pick = lambda a: np.where(present, a[np.minimum(now, len(s.keys) - 1)], 0)
+
+    def pick(a):            # a field of the contacts now, 0 for those lost since 0
+        out = np.zeros(len(now), a.dtype)
+        out[present] = a[now[present]]
+        return out
+
     fn, ft = pick(s.fn), pick(np.abs(s.ft))
     pts = np.column_stack([sim.x, np.zeros(n)])
     z = lambda v: np.column_stack([v, np.zeros(n)])
@@ -397,9 +402,10 @@ def plot_anatomy(path, panels, dpi=150):
     """One PNG at ``path`` with a panel per (title, sim, s0) of ``panels``: the disks (light
     fill), the walls, the grain contacts (at 0 or now, drawn between the centres now) with a
     positive own second-order work since 0 thin and grey, the negative ones thick and red, the
-    largest cluster of those in dark blue, and the velocity fluctuation (``velocity_fluctuation``)
-    of the backbone disks as arrows, scaled per panel (the key gives the scale).  The panel's
-    title carries its ``anatomy`` figures."""
+    largest cluster of those in dark blue, and the velocity fluctuation of the backbone disks as
+    arrows (cell means, ``coarse_fluctuation``), scaled per panel (the 90th percentile 0.9 cell
+    long; the key gives the scale).  The panel's title carries its ``anatomy`` figures.
+    ``panels``: [(title, Simulation now, ContactState at 0)], one or more (ValueError if none)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

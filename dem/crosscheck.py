@@ -29,6 +29,10 @@ def _log(msg):
     print(f"[crosscheck] {msg}", file=sys.stderr, flush=True)
 
 
+def _silent(msg):
+    pass
+
+
 # -- the three parts ---------------------------------------------------------------------------
 def hmodel_part(eta_a=1.029, sigma2=200e3, alphas=None, domain_sigma2=(100e3, 200e3, 400e3),
                 n_dir=180, workers=None, params=None):
@@ -99,7 +103,7 @@ def comparison_state(refs, norm, alphas):
 
 def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, threads=None,
              alphas=None, max_steps=None, resume=False, domain=True, hmodel_boundary=None,
-             params=None, scheduler=None):
+             params=None, scheduler=None, verbose=True):
     """DEM: compaction, drained biaxial test with states saved along the path, their
     relaxation under stress control, and the directional analysis (default: the paper's 45
     directions, each twice) at the comparison state chosen by ``comparison_state``
@@ -113,6 +117,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     interrupted run in ``out_dir`` finished (the biaxial test or its checkpoint, the relaxed
     references, the probe runs already on disk).
     ``params``: DemParams of the sample (default: the paper's set); n and seed override it.
+    ``verbose``: progress lines on stderr.
     """
     from . import io
     from .domain import run_domain
@@ -122,6 +127,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     from .threads import set_default_threads
 
     set_default_threads(threads)
+    log = _log if verbose else _silent
     bdir = os.path.join(out_dir, "biaxial")
     summary_path = os.path.join(bdir, "summary.json")
     a_path = os.path.join(bdir, "stateA.npz")
@@ -133,14 +139,14 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
         rows = [[r[c] for c in COLUMNS] for r in io.read_csv(os.path.join(bdir, "biaxial.csv"))[1]]
         res = BiaxialResult(rows, a_path, bool(summ["eta_a_reached"]), summ.get("compaction", {}),
                             float(summ["wall_time"]))
-        _log(f"DEM: biaxial test taken from {bdir} ({len(rows)} rows)")
+        log(f"DEM: biaxial test taken from {bdir} ({len(rows)} rows)")
     else:
         # the states along the path; 1.0 (the peak, above what constant stress holds)
         # brackets eta_lim from above
         P = (params or DemParams()).replace(n=n, seed=seed)
         res = run_biaxial(P, bdir, rate=rate, eta_a=eta_a, vtk=False,
                           resume=resume, save_fractions=SAVE_FRACTIONS + (1.0,),
-                          save_etas=(ETA2_OF_P3,))
+                          save_etas=(ETA2_OF_P3,), verbose=verbose)
     opts = ProbeOptions() if max_steps is None else ProbeOptions(max_steps=int(max_steps))
     alphas = directions() if alphas is None else [float(a) for a in alphas]
     t_probes0 = time.time()
@@ -149,7 +155,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     def choose(refs):
         name, info = comparison_state(refs, opts.norm, alphas)
         chosen.update(info)
-        _log(f"DEM: comparison state {name} (eta_R {info['eta_R']:.4f}, largest probe increment "
+        log(f"DEM: comparison state {name} (eta_R {info['eta_R']:.4f}, largest probe increment "
              f"{info['max_eta_increment']:.4f}, largest eta held {info['eta_held_max']:.4f}; "
              f"rule met: {info['rule_met']})")
         return [nm for nm, _, oc, _ in refs if domain and oc == "equilibrium"] + [name]
@@ -158,7 +164,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     drows, bounds, probes_by = run_domain(bdir, ddir, alphas=alphas, opts=opts, workers=workers,
                                           scheduler=scheduler, resume=resume,
                                           hmodel=hmodel_boundary or False,
-                                          choose=choose)
+                                          choose=choose, verbose=verbose)
     probes = probes_by[chosen["state"]]
     stages = {"compaction + biaxial test (when it ran)": res.wall_time,
               "relaxations and probes (this run)": time.time() - t_probes0}
@@ -596,7 +602,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
                    dem_max_steps=None, threads=None, resume=False, dem_domain=None,
                    dem_params=None, scheduler=None, hmodel_params=None, burst=True,
-                   burst_ratios=None, burst_fractions=None):
+                   burst_ratios=None, burst_fractions=None, verbose=True):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
@@ -613,6 +619,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     ``burst``: the burst section (``dem.crosscheck_burst``): the proportional strain paths of
     ``burst_ratios`` (default -2) from ``burst_fractions`` (default 0.90) of each part's drained
     peak, c held below and past its peak, in the H-model, the FE specimen and the DEM sample.
+    ``verbose``: progress lines on stderr.
     """
     from hmodel.io import atomic_open
 
@@ -627,21 +634,22 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     rate = dflt["rate"] if rate is None else float(rate)
     dem_max_steps = dflt["max_steps"] if dem_max_steps is None else int(dem_max_steps)
     timings = {}
+    log = _log if verbose else _silent
     t = time.time()
-    _log("H-model: drained path, point A, directional analysis, bifurcation domain")
+    log("H-model: drained path, point A, directional analysis, bifurcation domain")
     h = hmodel_part(alphas=directions() if dem_alphas is None else list(dem_alphas),
                     domain_sigma2=(100e3, 200e3, 400e3) if domain else (), workers=workers,
                     params=H)
     timings["H-model (path, probes, domain)"] = time.time() - t
     t = time.time()
-    _log(f"FE: {fem_mesh[0]} x {fem_mesh[1]} quads, n_dir {fem_n_dir}")
+    log(f"FE: {fem_mesh[0]} x {fem_mesh[1]} quads, n_dir {fem_n_dir}")
     fem = fem_part(os.path.join(out_dir, "fem"), nx=fem_mesh[0], ny=fem_mesh[1], n_dir=fem_n_dir,
                    params=H)
     timings["FE specimen"] = time.time() - t
     dem = None
     if not skip_dem:
         t = time.time()
-        _log(f"DEM: {n} disks, rate {rate}/s, 45 probes x 2")
+        log(f"DEM: {n} disks, rate {rate}/s, 45 probes x 2")
         hb = None
         for d in h.get("domain", []):
             if abs(d.sigma2 - 200e3) < 1.0:
@@ -652,7 +660,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
         dem = dem_part(os.path.join(out_dir, "dem"), n=n, seed=seed, rate=rate, workers=workers,
                        alphas=dem_alphas, max_steps=dem_max_steps, threads=threads,
                        resume=resume, domain=(not full) if dem_domain is None else dem_domain,
-                       hmodel_boundary=hb, params=P, scheduler=scheduler)
+                       hmodel_boundary=hb, params=P, scheduler=scheduler, verbose=verbose)
         n_runs = 2 * sum(len(r) for r in dem["probes_by_state"].values())
         timings[f"DEM ({n} disks: compaction, biaxial, {len(dem['domain_rows'])} relaxations, "
                 f"{n_runs} probe runs)"] = time.time() - t
@@ -666,7 +674,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
                                ratios=tuple(burst_ratios or cb.BURST_RATIOS),
                                fractions=tuple(burst_fractions or cb.BURST_FRACTIONS),
                                fem_mesh=fem_mesh, fem_n_dir=fem_n_dir, dem_rate=rate,
-                               workers=workers, log=_log)
+                               workers=workers, log=log, verbose=verbose)
         timings["burst (H-model, FE, DEM)"] = time.time() - t
     c = conclusions(h, dem["probes"] if dem else None, fem, dem)
     figs = _figures(out_dir, h, dem, fem)

@@ -48,8 +48,10 @@ def _rows(rows, keys=("ratio", "start_fraction", "switch", "eta_start", "eta_pea
 
 
 def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BURST_FRACTIONS,
-               fem_mesh=(4, 8), fem_n_dir=72, dem_rate=0.01, workers=None, log=print) -> dict:
-    """Run the three parts' burst experiments into ``out_dir``/burst/{hmodel,fem,dem}.
+               fem_mesh=(4, 8), fem_n_dir=72, dem_rate=0.01, workers=None, log=print,
+               verbose=True) -> dict:
+    """Run the three parts' burst experiments into ``out_dir``/burst/{hmodel,fem,dem}
+    (``log``: the section's progress lines; ``verbose``: the DEM's own).
     ``dem_biaxial_dir``: a ``dem biaxial`` folder with its states (None: no DEM part).
     Returns {part: {"rows": burst rows (dicts), "histories": E_c per volume against time,
     "eta_peak": the part's drained peak eta}}."""
@@ -87,7 +89,7 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
         log(f"burst: DEM sample of {dem_biaxial_dir}")
         ddir = os.path.join(out_dir, "burst", "dem")
         rows, summ = dem_burst(dem_biaxial_dir, ddir, list(ratios), list(fractions),
-                               BurstOptions(rate=dem_rate), workers=workers, verbose=True)
+                               BurstOptions(rate=dem_rate), workers=workers, verbose=verbose)
         st, _ = io.load_state(os.path.join(dem_biaxial_dir, "states", f"state_f{fractions[0]:.3f}.npz"))
         vol = (st.walls[1] - st.walls[0]) * (st.walls[3] - st.walls[2]) * st.params.thickness
         out["dem"] = {"rows": _rows(rows), "eta_peak": summ["drained_eta_peak"],

@@ -80,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
     g.add_argument("--n-sphere", type=opt.integer(1), default=d.n_sphere,
                    help="strain directions sampled for the local min of W2 (default %(default)s)")
-    g.add_argument("--quiet", action="store_true")
+    opt.add_quiet(g)
     _burst_parser(sub)
     return ap
 
@@ -121,7 +121,7 @@ def _burst_parser(sub):
                         "--d-eps1 is the drained path's)")
     g = _specimen_options(b, c.specimen, eps1_max=False)
     g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
-    g.add_argument("--quiet", action="store_true")
+    opt.add_quiet(g)
 
 
 def check_config(cfg: BiaxialConfig) -> None:

@@ -54,6 +54,7 @@ def _start(args, stage, text):
     from the timings), and say what starts. Returns the start time of the timings."""
     opt.check_out_dir(args.out)
     compile_kernels()
+    stage.quiet = args.quiet
     _say(stage, text)
     return time.time()
 
@@ -71,7 +72,6 @@ def cmd_biaxial(args, stage):
     if args.eps1_max >= 1.0:
         raise opt.OptionError(f"--eps1-max {args.eps1_max:g} is out of range: allowed 0 < value < 1 "
                               "(the volume V0 det(I - eps) vanishes at eps1 = 1)")
-    stage.quiet = args.quiet
     t0 = _start(args, stage, f"drained biaxial test, sigma2 = {sigma2:g} Pa, to eps1 = {args.eps1_max:g}")
     r = biaxial_test(P, sigma2, args.d_eps1, args.eps1_max, progress=not args.quiet)
     cols = biaxial_columns(r)
@@ -285,7 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step [-]")
     b.add_argument("--eta-a", type=R(0, 2), default=1.029, help="stress ratio of point A (marked)")
     b.add_argument("--out", default="out/hmodel", help="output folder")
-    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    opt.add_quiet(b)
     add_param_options(b)
     b.set_defaults(func=cmd_biaxial)
 
@@ -302,6 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stress-probe spacing [deg]")
     p.add_argument("--sigma-norm", type=R(0, unit="Pa"), default=2.5e3, help="stress probe norm [Pa]")
     p.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_quiet(p)
     add_param_options(p)
     p.set_defaults(func=cmd_probes)
 
@@ -314,6 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--workers", type=opt.integer(1), default=None,
                    help="parallel processes, >= 1 (default: min(pressures, cores))")
     d.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_quiet(d)
     add_param_options(d)
     d.set_defaults(func=cmd_domain)
 
@@ -345,6 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the directional analysis (where each path's strain direction enters "
                         "the cone W2 <= 0; the first W2 = 0 of the drained path)")
     u.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_quiet(u)
     add_param_options(u)
     u.set_defaults(func=cmd_burst)
 
@@ -372,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="residual evaluations per start (each Jacobian costs 2 more model paths "
                         "per free parameter)")
     f.add_argument("--out", default="out/fit", help="output folder")
-    f.add_argument("--quiet", action="store_true", help="no progress lines")
+    opt.add_quiet(f)
     add_param_options(f)
     f.set_defaults(func=cmd_fit)
 
@@ -453,7 +456,6 @@ def cmd_fit(args, stage):
     if args.d_eps1_search > e_max:
         raise opt.OptionError(f"--d-eps1-search {args.d_eps1_search:g} is out of range: allowed 0 < "
                               f"value <= {e_max:g} (the last eps1 of the data)")
-    stage.quiet = args.quiet
     t0 = _start(args, stage, f"fit of {', '.join(args.free)} to {args.data} ({curve.eps1.size} points, "
                 f"sigma2 = {curve.sigma2:.6g} Pa: {curve.sigma2_from}), {args.starts} starts")
     res = hfit.fit_curve(curve, P, args.free, args.bounds, n_starts=args.starts, seed=args.seed,

@@ -21,7 +21,7 @@ import tempfile
 import threading
 from contextlib import contextmanager
 
-__all__ = ["OptionError", "Parser", "real", "integer", "reals", "check_out_dir", "check_out_file",
+__all__ = ["OptionError", "Parser", "real", "integer", "reals", "add_quiet", "check_out_dir", "check_out_file",
            "check_memory", "param_option_error", "add_param_options", "params_from", "record_params",
            "Stage", "run_cli", "announce_compilation"]
 
@@ -35,14 +35,55 @@ class Parser(argparse.ArgumentParser):
     exiting (``run_cli`` prints it as ``error: ...`` and returns 2). A value that starts with a
     minus sign and a digit, a point, inf or nan (``--ratios -2,-1``, ``--dc -1e-3``, ``--ratios
     -inf``) is a value, not an option (argparse takes only plain negative numbers so), so that
-    its type can check it and say what is allowed."""
+    its type can check it and say what is allowed.
+
+    Options are exact: no prefix matching (argparse would take ``--sigma`` for ``--sigma2`` and
+    run), for this parser and its subcommands (``add_subparsers`` makes them of this class). An
+    unknown option is refused by the subcommand that got it, naming the options it resembles and
+    pointing at that subcommand's own ``--help``."""
 
     def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
 
     def error(self, message):
         raise OptionError(f"{message} (see {self.prog} --help)")
+
+    def parse_known_args(self, args=None, namespace=None):
+        """argparse's, but anything left over is an error here, in the (sub)parser that got it
+        (argparse would hand it to the top parser, whose message names the top --help)."""
+        ns, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(self._unknown(extras, ns))
+        return ns, extras
+
+    def _unknown(self, extras, ns) -> str:
+        """The message for the first of ``extras``: an unknown option (with the options of this
+        parser it resembles: those it abbreviates, else close spellings), an option of the
+        subcommand written before it, or a stray value."""
+        word = extras[0]
+        if not word.startswith("-"):
+            return f"unexpected argument {word!r} (an option is written --name value)"
+        option = word.split("=", 1)[0]
+        for sub in (a for a in self._actions if isinstance(a, argparse._SubParsersAction)):
+            chosen = sub.choices.get(getattr(ns, sub.dest, None) or "")
+            if chosen is not None and option in chosen._option_string_actions:
+                return (f"{option} is an option of the subcommand: write it after "
+                        f"'{chosen.prog.split()[-1]}'")
+        return f"no option {option}" + _resembles(option, self._option_string_actions)
+
+
+def _resembles(option, options) -> str:
+    """' (options are written in full): did you mean --sigma2?' for ``option``: the ``options``
+    it abbreviates (what argparse's prefix matching would have taken), else close spellings."""
+    import difflib
+    longs = sorted(o for o in options if o.startswith("--"))
+    like = ([o for o in longs if o.startswith(option)]
+            or difflib.get_close_matches(option, longs, n=3, cutoff=0.75))
+    if not like:
+        return ""
+    return f" (options are written in full): did you mean {' or '.join(like)}?"
 
 
 def _interval(lo, hi, lo_open, hi_open):
@@ -107,6 +148,13 @@ def reals(lo=None, hi=None, *, lo_open=True, hi_open=True, unit=""):
 
     parse.__name__ = "reals"
     return parse
+
+
+def add_quiet(ap: argparse.ArgumentParser):
+    """--quiet, the same on every command that shows progress: no progress lines on stderr
+    (results, warnings and errors are still printed)."""
+    ap.add_argument("--quiet", action="store_true",
+                    help="no progress lines on stderr (results, warnings and errors still shown)")
 
 
 def check_out_dir(path, option="--out"):

@@ -23,7 +23,7 @@ from contextlib import contextmanager
 
 __all__ = ["OptionError", "Parser", "real", "integer", "reals", "add_quiet", "check_out_dir", "check_out_file",
            "check_memory", "param_option_error", "add_param_options", "params_from", "record_params",
-           "Stage", "run_cli", "announce_compilation"]
+           "Stage", "run_cli", "COMPILE_NOTICE", "announce_compilation", "listen_for_compilation"]
 
 
 class OptionError(ValueError):
@@ -383,12 +383,25 @@ def run_cli(parser, argv, run, errors=(ValueError,)) -> int:
         return 143
 
 
+# the line that announces a compilation of the kernels (CLI and library alike), with its time:
+# 85-141 s for all of hmodel's on this machine, 10-25 s for fem's and dem's own
+COMPILE_NOTICE = "compiling kernels, once: one to two minutes (Numba caches them for later runs)"
+_compile_announced = False      # COMPILE_NOTICE printed in this process
+_listening = False              # listen_for_compilation registered
+_PACKAGES = ("hmodel", "fem", "dem")
+
+
+def _announce(stream=None):
+    global _compile_announced
+    print(COMPILE_NOTICE, file=sys.stderr if stream is None else stream, flush=True)
+    _compile_announced = True
+
+
 def announce_compilation(functions, stream=None):
-    """Print "compiling kernels, once: about a minute" once if some Numba function of
-    ``functions`` has no compiled code in this process and none in Numba's cache (the first run
-    after an install); returns True if it printed. The first call then compiles and caches them
-    (time the caller should keep out of its reported timings)."""
-    stream = sys.stderr if stream is None else stream
+    """Print COMPILE_NOTICE ("compiling kernels, once: one to two minutes") if some Numba
+    function of ``functions`` has no compiled code in this process and none in Numba's cache
+    (the first run after an install); returns True if it printed. The first call then compiles
+    and caches them (time the caller should keep out of its reported timings)."""
     for f in functions:
         if getattr(f, "signatures", None) or getattr(f, "targetoptions", {}).get("inline") == "always":
             continue      # compiled in this process, or inlined into its callers (never cached alone)
@@ -397,7 +410,29 @@ def announce_compilation(functions, stream=None):
         except Exception:
             cached = True     # unknown: say nothing rather than something wrong
         if not cached:
-            print("compiling kernels, once: about a minute (Numba caches them for later runs)",
-                  file=stream, flush=True)
+            _announce(stream)
             return True
     return False
+
+
+def listen_for_compilation():
+    """Print COMPILE_NOTICE on stderr the first time, in this process, that Numba compiles a
+    function of hmodel, fem or dem (not when it loads one from its cache), unless the CLI's
+    ``announce_compilation`` has said so already: a script's first library call after an
+    install is then announced as the CLI's is. Registered once, by importing hmodel or dem."""
+    from numba.core import event
+
+    class FirstCompilation(event.Listener):
+        def on_start(self, ev):
+            f = getattr(ev.data.get("dispatcher"), "py_func", None)
+            if (not _compile_announced
+                    and (getattr(f, "__module__", None) or "").split(".")[0] in _PACKAGES):
+                _announce()
+
+        def on_end(self, ev):
+            pass
+
+    global _listening
+    if not _listening:
+        event.register("numba:compile", FirstCompilation())
+        _listening = True

@@ -8,6 +8,7 @@ import sys
 import time
 
 from hmodel import options as opt     # the command-line rules shared by every CLI
+from hmodel.io import fmt
 
 from .threads import available_threads
 
@@ -91,8 +92,9 @@ def cmd_biaxial(a):
                       params_note=f"python -m dem biaxial; {a.params_note}", verbose=not a.quiet)
     print(a.params_note)
     print(f"biaxial: {len(res.rows)} rows -> {os.path.join(a.out, 'biaxial.csv')}; "
-          f"stateA={res.state_a_path} (eta_a reached: {res.eta_a_reached}); "
-          f"porosity after compaction={res.compaction.get('porosity')}; "
+          f"stateA={res.state_a_path} (eta {a.eta_a:g} "
+          f"{'reached' if res.eta_a_reached else 'not reached: the fallback state, see summary.json'}); "
+          f"porosity after compaction {fmt(res.compaction.get('porosity'), '.4f')}; "
           f"wall time {time.time() - t0:.1f} s")
 
 
@@ -218,7 +220,7 @@ def cmd_bench(a):
     res = bench(params=_params(a), steps=a.steps, cache_dir=a.cache, busy=a.busy_core,
                 rounds=a.rounds)
     for k, v in res.items():
-        print(f"{k}: {v}")
+        print(f"{k}: {fmt(v, '.4g') if isinstance(v, float) else v}")
     print(f"particle-steps/s: {res['particle_steps_per_s_auto']:.4g}")
 
 

@@ -298,13 +298,81 @@ def _angle_axes(ax):
     ax.legend(fontsize=8)
 
 
+# how a DEM probe without a W2 is drawn (on W2 = 0): (outcome, marker, colour, label)
+OUTCOME_MARKS = (("failure", "^", "C3", "DEM failure (runaway)"),
+                 ("undecided", "s", "C7", "DEM undecided (cap)"))
+
+
+def polar_figure(path, h, rows, dem_title="DEM (Fig. 15)"):
+    """fig_polar_w2.png: the H-model at A (``h``: ``hmodel_part``'s, its sweep and, if any, its
+    stress probes in the DEM's directions) and the DEM's probes (``rows``: probes.csv rows, or
+    None) in the paper's polar diagram (``hmodel.plots``), each with its cone (H-model: W2 <= 0;
+    DEM: failure or W2 <= 0) shaded and its angles written and its plastic zone at the rim, and,
+    where the H-model's cone is narrow, a third panel of W2 against alpha_sigma around it with
+    both parts. A DEM W2 is drawn only for an equilibrium probe (clipped to [-0.5, 1.1])."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hmodel.io import save_figure
+    from hmodel.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes, polar_series
+    from hmodel.probes import arcs
+    rmax = 1.6
+    sw = h["sweep"]
+    cone_h, plastic_h = arcs(sw.alpha_sigma, sw.w2 <= 0), arcs(sw.alpha_sigma, sw.plastic)
+    series_h = [("H-model W2 (strain-probe sweep)", sw.alpha_sigma, sw.w2, "C3-")]
+    if "stress_probes" in h:
+        sp = h["stress_probes"]
+        series_h.append(("H-model, DEM directions", sp.probe.alpha_sigma, sp.probe.w2, "ko"))
+    zoom = needs_zoom(cone_h)
+    fig = plt.figure(figsize=(17.5 if zoom else 12, 6.9))
+    gs = fig.add_gridspec(1, 3 if zoom else 2, width_ratios=[1, 1, 0.95] if zoom else [1, 1])
+    ax = fig.add_subplot(gs[0, 0], projection="polar")
+    polar_axes(ax, rmax)
+    mark_plastic(ax, plastic_h, rmax)
+    mark_cone(ax, cone_h, rmax)
+    polar_series(ax, series_h, rmax)
+    ax.set_title("H-model at A (Fig. 8)", pad=28)
+    axes = [ax]
+    series_d = []
+    ax = fig.add_subplot(gs[0, 1], projection="polar")
+    polar_axes(ax, rmax)
+    if rows:
+        outc = np.array([r["outcome"] for r in rows])
+        a = np.array([float(r["alpha_sigma"]) for r in rows])
+        eq = outc == "equilibrium"
+        w = np.array([float(r["w2"]) if e else np.nan for r, e in zip(rows, eq)])
+        cone_d = arcs(a, (outc == "failure") | (eq & (np.nan_to_num(w, nan=1.0) <= 0)))
+        mark_plastic(ax, arcs(a, np.array([bool(r["plastic"]) for r in rows]) & eq), rmax)
+        mark_cone(ax, cone_d, rmax, label=r"failure or $W_2 \leq 0$")
+        o = np.argsort(a)
+        loop_a, loop_w = np.append(a[o], a[o][0] + 360.0), np.append(w[o], w[o][0])
+        series_d.append((f"DEM W2 ({len(rows)} stress probes; clipped to [-0.5, 1.1])", loop_a,
+                         np.clip(loop_w, -0.5, rmax - 0.5), "C0o-"))
+        for kind, m, col, lab in OUTCOME_MARKS:
+            sel = outc == kind
+            if sel.any():
+                series_d.append((lab, a[sel], np.zeros(sel.sum()), col + m))
+        polar_series(ax, series_d, rmax)
+        if not cone_d:
+            ax.plot([], [], " ", label=r"every probe settled with $W_2 > 0$")
+    ax.set_title(dem_title, pad=28)
+    axes.append(ax)
+    for ax in axes:
+        ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2,
+                  frameon=False)
+    if zoom:
+        cone_zoom(fig.add_subplot(gs[0, 2]), series_h + series_d, cone_h, plastic_h, pad_deg=15.0)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
 def _figures(out, h, dem, fem):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from hmodel.io import save_figure
-    from hmodel.plots import polar_axes
 
     figs = {}
     sw = h["sweep"]
@@ -319,24 +387,13 @@ def _figures(out, h, dem, fem):
     state_note = (f", state {dem['comparison']['state']} (eta {dem['comparison']['eta_R']:.3f})"
                   if dem else "")
 
-    def outcome_marks(ax, polar_plot=False):
+    def outcome_marks(ax):
         """Failures (ran away: W2 <= 0 in the limit) as red triangles on W2 = 0, undecided
         probes as grey squares on W2 = 0."""
-        for kind, m, col, lab in (("failure", "^", "C3", "DEM failure (runaway)"),
-                                  ("undecided", "s", "0.6", "DEM undecided (cap)")):
+        for kind, m, col, lab in OUTCOME_MARKS:
             sel = outc == kind
-            if not sel.any():
-                continue
-            if polar_plot:
-                polar(ax, a_dem[sel], np.zeros(sel.sum()), m, lab)
-                ax.lines[-1].set_color(col)
-            else:
+            if sel.any():
                 ax.plot(a_dem[sel], np.zeros(sel.sum()), m, color=col, label=lab)
-
-    def polar(ax, a_deg, w, style, label):
-        a = np.radians(np.asarray(a_deg, float))
-        r = 0.5 + np.asarray(w, float)
-        ax.plot(r * np.cos(a), r * np.sin(a), style, label=label, ms=4, lw=1.2)
 
     # stress-strain (Figs. 4-5 and 13-14)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.3), constrained_layout=True)
@@ -383,24 +440,8 @@ def _figures(out, h, dem, fem):
     save_figure(fig, os.path.join(out, figs["stress_strain"]))
 
     # polar W2 (Figs. 8 and 15)
-    fig, axs = plt.subplots(1, 2, figsize=(11, 5.6), constrained_layout=True)
-    for ax in axs:
-        polar_axes(ax, rmax=1.6)
-    polar(axs[0], sw.alpha_sigma[o], sw.w2[o], "C3-", "H-model W2 (strain-probe sweep)")
-    if "stress_probes" in h:
-        sp = h["stress_probes"]
-        polar(axs[0], sp.probe.alpha_sigma, sp.probe.w2, "ko", "H-model, DEM directions")
-    axs[0].set_title("H-model at A (Fig. 8)")
-    if rows:
-        a = [r["alpha_sigma"] for r in rows] + [rows[0]["alpha_sigma"]]
-        polar(axs[1], a, np.clip(conv("w2") + conv("w2")[:1], -0.5, 1.1), "C0o-",
-              f"DEM W2 ({len(rows)} stress probes; clipped to [-0.5, 1.1])")
-        outcome_marks(axs[1], polar_plot=True)
-    axs[1].set_title(f"DEM (Fig. 15){state_note}")
-    for ax in axs:
-        ax.legend(fontsize=8, loc="upper left")
     figs["polar_w2"] = "fig_polar_w2.png"
-    save_figure(fig, os.path.join(out, figs["polar_w2"]))
+    polar_figure(os.path.join(out, figs["polar_w2"]), h, rows, f"DEM (Fig. 15){state_note}")
 
     # micro against macro (Fig. 16, and the H-model identity)
     fig, axs = plt.subplots(1, 2, figsize=(11, 4.3), constrained_layout=True)

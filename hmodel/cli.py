@@ -20,7 +20,7 @@ from . import plots
 from .driver import MixedControlError
 from .experiment import (DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test, bifurcation_domain,
                          compile_kernels, probe_columns, state_at_eta)
-from .io import atomic_open, json_safe, write_csv, write_table
+from .io import atomic_open, fmt, json_safe, write_csv, write_table
 from .options import add_param_options, params_from, record_params
 from .params import ParamError, save_params
 from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
@@ -126,8 +126,9 @@ def cmd_probes(args, stage):
     plots.fig_probes(sw, pth("fig3_probes.png"))
     plots.fig_stress_components(sw, 0, pth("fig6_axial_components.png"))
     plots.fig_stress_components(sw, 1, pth("fig7_lateral_components.png"))
-    plots.fig_polar_w2([("H-model W2", sw.alpha_sigma, sw.w2, "C3-")], pth("fig8_polar_w2.png"),
-                       title=f"Normalized second-order work at A ($\\eta$ = {args.eta}) (Fig. 8)")
+    plots.fig_polar_w2([("H-model W2", sw.alpha_sigma, sw.w2, "C0-")], pth("fig8_polar_w2.png"),
+                       title=f"Normalized second-order work at A ($\\eta$ = {args.eta}) (Fig. 8)",
+                       cone=arcs(sw.alpha_sigma, sw.w2 <= 0), plastic=arcs(sw.alpha_sigma, sw.plastic))
     plots.fig_w2_split(sw, pth("fig9_w2_split.png"))
     plots.fig_w2_normal_tangential(sw, pth("fig11_w2_normal_tangential.png"),
                                    title="H-model: normal and tangential parts of W2 (Fig. 11)")
@@ -234,7 +235,7 @@ def cmd_burst(args, stage):
                                 f"$\\eta$ = {res.eta_peak:.4f})")
     plots.fig_burst_ke(res.histories, pth("fig_burst_ke.png"),
                        title=f"Material point (homogeneous specimen {args.width:g} x {args.height:g} m, "
-                             f"{args.density:g} kg/m$^3$, $\\zeta$ = {args.damping_ratio:g}): "
+                             f"{args.density:g} kg/m$^3$, $\\zeta$ = {args.damping_ratio:g}):\n"
                              f"kinetic energy after the switch, c held at c_switch + {args.dc:g} Pa")
     plots.fig_burst_residual(res.histories, pth("fig_burst_residual.png"))
     stage.wrote("fig_burst_paths.png", "fig_burst_ke.png", "fig_burst_residual.png")
@@ -249,12 +250,14 @@ def cmd_burst(args, stage):
     stage.wrote("summary.json")
     print(args.params_note)
     print(f"drained peak eta = {res.eta_peak:.4f} at sigma2 = {args.sigma2:g} Pa"
-          + (f"; first W2 = 0 of the directional analysis at eta = {cone['eta_first_w2']:.4f}"
-             if cone else ""))
+          + (f"; first W2 = 0 of the directional analysis at eta = "
+             f"{fmt(cone['eta_first_w2'], '.4f', 'never (before the peak)')}" if cone else ""))
+    # eta_peak_c: none where c does not peak within --path-strain (one below run, at its end)
     print("    R  start  eta_start  eta_peak_c  (fraction)  switch  static  outcome      E_c growth")
     for r in res.rows:
+        frac = f"({fmt(r['fraction_peak_c'], '.3f')})" if np.isfinite(r["eta_peak_c"]) else ""
         print(f"{r['ratio']:5g}  {r['start_fraction']:5g}  {r['eta_start']:9.4f}  "
-              f"{r['eta_peak_c']:10.4f}  ({r['fraction_peak_c']:.3f})    {r['switch']:6s}  "
+              f"{fmt(r['eta_peak_c'], '10.4f')}  {frac:7s}     {r['switch']:6s}  "
               f"{'yes' if r['static_solution'] else 'none':6s}  {r['outcome']:11s}  {r['ke_growth']:.3g}")
     if cone.get("cone_at_first_w2"):
         ca = cone["cone_at_first_w2"]
@@ -263,8 +266,10 @@ def cmd_burst(args, stage):
               + (f", i.e. the proportional paths of R in [{rr[0]:.3f}, {rr[1]:.3f}]" if rr else ""))
     if cone:
         for R, ce in cone["paths"].items():
-            print(f"R = {R}: strain direction alpha_eps = {ce['alpha_eps']:.2f} deg enters the cone "
-                  f"W2 <= 0 of the drained path at eta = {ce['eta']:.4f}")
+            where = (f"enters the cone W2 <= 0 of the drained path at eta = {ce['eta']:.4f}"
+                     if np.isfinite(ce["eta"]) else
+                     "never enters the cone W2 <= 0 of the drained path before its peak")
+            print(f"R = {R}: strain direction alpha_eps = {ce['alpha_eps']:.2f} deg {where}")
     worst = max(r["energy_residual"] for r in res.rows) if res.rows else 0.0
     print(f"energy balance: largest relative residual of a step {worst:.2e} (bound 1e-6)")
     print(f"wrote {args.out}/burst.csv, history.csv, paths.csv, params.json, summary.json, fig_burst_*.png "
@@ -428,9 +433,10 @@ def cmd_domain(args, stage):
     stage.wrote("domain.csv", record_params(args.out, P, f"python -m hmodel domain; {note}"))
     plots.fig_domain(pts, os.path.join(args.out, "fig10_domain.png"))
     print(note)
+    pq = lambda p, q: (f"(p, q) = ({p:.4g}, {q:.4g}) Pa" if np.isfinite(p) else "never before the peak")
     for d in pts:
-        print(f"sigma2 = {d.sigma2:g} Pa: first W2<=0 at (p, q) = ({d.p_w2:.4g}, {d.q_w2:.4g}), "
-              f"W2_sigma<=0 at ({d.p_w2sigma:.4g}, {d.q_w2sigma:.4g}), peak ({d.p_peak:.4g}, {d.q_peak:.4g}) Pa")
+        print(f"sigma2 = {d.sigma2:g} Pa: first W2 <= 0 at {pq(d.p_w2, d.q_w2)}; first W2_sigma <= 0 "
+              f"at {pq(d.p_w2sigma, d.q_w2sigma)}; peak at {pq(d.p_peak, d.q_peak)}")
     print(f"wrote {args.out}/domain.csv, params.json, fig10_domain.png ({t_run:.1f} s)")
 
 

@@ -288,8 +288,9 @@ def record_params(out_dir, params, note="") -> str:
 
 
 class Stage:
-    """Where a command is, for the line printed when it is interrupted: ``at(text)`` as it goes,
-    ``wrote(name)`` for every output file completed."""
+    """Where a command is, for the line printed when it is interrupted: ``at(text)`` as it goes
+    (or ``at(callable)``, asked only when the line is printed: e.g. the last row a file holds
+    then), ``wrote(name)`` for every output file completed."""
 
     def __init__(self, out_dir=None):
         self.where = "start-up"
@@ -305,7 +306,8 @@ class Stage:
     def line(self, signame):
         done = (f"complete in {self.out_dir}: {', '.join(self.written)}" if self.written
                 else "no output written yet")
-        return f"interrupted ({signame}) during {self.where}; {done}"
+        where = self.where() if callable(self.where) else self.where
+        return f"interrupted ({signame}) during {where}; {done}"
 
 
 class Terminated(BaseException):

@@ -223,7 +223,8 @@ def cone_zoom(ax, series, cone, plastic=(), pad_deg=None, label=r"$W_2 \leq 0$",
                    - {round(e, 0) for c in cone for e in c})
     edges = sorted({e for c in cone for e in c})
     ax.set_xticks(ticks + edges)
-    ax.set_xticklabels([f"{t:g}" for t in ticks] + [f"{e:.1f}" for e in edges], fontsize=8)
+    ax.set_xticklabels([f"{t % 360:g}" for t in ticks] + [f"{e % 360:.1f}" for e in edges],
+                       fontsize=8)
     for lab in ax.get_xticklabels()[len(ticks):]:
         lab.set_color(color)
         lab.set_fontweight("bold")

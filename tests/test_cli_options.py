@@ -123,6 +123,19 @@ def test_run_options_on_every_long_dem_command(name):
         assert s.default is None and s.type is None and "scheduler address" in s.help
 
 
+def test_fit_dem_parser_is_exact_with_quiet(monkeypatch):
+    """`python -m hmodel.fit_dem` (one command, no subcommands) follows the same rules."""
+    import hmodel.fit_dem as fd
+    import hmodel.options as opt
+    seen = {}
+    monkeypatch.setattr(opt, "run_cli", lambda parser, *a, **k: seen.setdefault("parser", parser) and 0)
+    fd.main([])
+    parser = seen["parser"]
+    assert parser.allow_abbrev is False and "--quiet" in parser._option_string_actions
+    with pytest.raises(OptionError, match=r"no option --star .*did you mean --starts\?"):
+        parser.parse_args(["--star", "2"])
+
+
 def test_pending_run_options_are_dem_burst_only():
     assert {name for name, _ in PENDING} <= {"burst"}
 

@@ -64,7 +64,7 @@ def numpy_baseline(state, steps):
 
 
 def main():
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(allow_abbrev=False)
     ap.add_argument("--sizes", default="300,2000,12000", help="sample sizes [disks]")
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (medians)")

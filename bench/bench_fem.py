@@ -97,7 +97,8 @@ class InterleavedBatch:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 allow_abbrev=False)
     ap.add_argument("--nx", type=int, default=20)
     ap.add_argument("--ny", type=int, default=40)
     ap.add_argument("--n-dir", type=int, default=180)

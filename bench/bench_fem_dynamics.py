@@ -58,7 +58,7 @@ class Timed:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     ap.add_argument("--nx", type=int, default=20)
     ap.add_argument("--ny", type=int, default=40)
     ap.add_argument("--n-dir", type=int, default=180)

@@ -90,7 +90,8 @@ def best_of(f, repeat, clock=time.process_time):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+                                 allow_abbrev=False)
     ap.add_argument("--points", type=int, default=2000, help="material points in the kernel batch")
     ap.add_argument("--repeat", type=int, default=5, help="repetitions (best time is kept)")
     args = ap.parse_args(argv)

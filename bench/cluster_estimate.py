@@ -29,7 +29,7 @@ from dem.domain import makespan, stage_steps     # noqa: E402
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, allow_abbrev=False)
     ap.add_argument("dir", help="a crosscheck output folder (or a dem domain folder with --seconds)")
     ap.add_argument("--workers", default="1,2,4,8,16,32,64", help="worker counts to estimate")
     ap.add_argument("--measured-workers", type=int, default=2,

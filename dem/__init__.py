@@ -3,3 +3,7 @@ section 4.  Modules: params (DemParams), kernels (all @njit loops), neighbours (
 walls (boundary control), simulation (State, Simulation), sample (generator, compaction),
 experiment (biaxial test), probes (directional analysis, W2), io (files), bench.
 CLI: python -m dem {biaxial, probes, bench}; see docs/dem.md."""
+
+from hmodel.options import listen_for_compilation
+
+listen_for_compilation()     # a script's first compilation is announced, as the CLI's

@@ -8,6 +8,7 @@ import sys
 import time
 
 from hmodel import options as opt     # the command-line rules shared by every CLI
+from hmodel.io import fmt
 
 from .threads import available_threads
 
@@ -88,11 +89,12 @@ def cmd_biaxial(a):
                       eps_max=a.eps_max, compaction_friction_deg=a.compaction_friction,
                       resume=a.resume, vtk=not a.no_vtk,
                       save_fractions=tuple(a.save_fractions), save_etas=tuple(a.save_etas),
-                      params_note=f"python -m dem biaxial; {a.params_note}")
+                      params_note=f"python -m dem biaxial; {a.params_note}", verbose=not a.quiet)
     print(a.params_note)
     print(f"biaxial: {len(res.rows)} rows -> {os.path.join(a.out, 'biaxial.csv')}; "
-          f"stateA={res.state_a_path} (eta_a reached: {res.eta_a_reached}); "
-          f"porosity after compaction={res.compaction.get('porosity')}; "
+          f"stateA={res.state_a_path} (eta {a.eta_a:g} "
+          f"{'reached' if res.eta_a_reached else 'not reached: the fallback state, see summary.json'}); "
+          f"porosity after compaction {fmt(res.compaction.get('porosity'), '.4f')}; "
           f"wall time {time.time() - t0:.1f} s")
 
 
@@ -128,9 +130,10 @@ def cmd_probes(a):
         print(f"[probes] {a.out} held an earlier sweep: moved to probe_runs.previous.jsonl; "
               "probes.csv and the figures are replaced at the end (--resume keeps a sweep)",
               file=sys.stderr)
-    state, ref = reference_state(state, a.out, opts, relax=not a.no_relax, resume=a.resume)
+    state, ref = reference_state(state, a.out, opts, relax=not a.no_relax, resume=a.resume,
+                                 verbose=not a.quiet)
     rows = run_probes(state, alphas, opts, workers=a.workers, scheduler=a.scheduler,
-                      checkpoint=ck)
+                      checkpoint=ck, verbose=not a.quiet)
     s2 = state.control.s_to[0]
     write_probe_files(rows, a.out, note=f"{state.params.n} disks, $\\sigma_2$ = {s2 / 1e3:.0f} kPa")
     from collections import Counter
@@ -163,7 +166,7 @@ def cmd_domain(a):
     from .domain import eta_lim_text
     rows, b, _ = run_domain(a.biaxial, a.out, states=states, alphas=alphas, opts=opts,
                          workers=a.workers, scheduler=a.scheduler, resume=a.resume,
-                         hmodel=not a.no_hmodel)
+                         hmodel=not a.no_hmodel, verbose=not a.quiet)
     print(f"domain: {len(rows)} states -> {os.path.join(a.out, 'domain.csv')}; lower boundary: "
           f"{b['lower_state']} (eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the "
           f"peak {b['eta_peak']:.4f}, {b['lower_why']}); {eta_lim_text(b)}; "
@@ -209,10 +212,11 @@ def cmd_burst(a):
     t0 = time.time()
     rows, s = run_burst(a.biaxial, a.out, a.ratios, a.start_fractions, a.burst_options,
                         workers=a.workers, threads=a.threads, params_file=a.params,
-                        stage=a.stage, resume=a.resume, scheduler=a.scheduler)
+                        stage=a.stage, resume=a.resume, scheduler=a.scheduler,
+                        verbose=not a.quiet)
     a.stage.wrote("params.json", "burst.csv", "history.csv", "paths.csv", "rest.csv",
-                  "summary.json", "fig_burst_c.png", "fig_burst_ke.png", "fig_burst_strain.png",
-                  "fig_burst_ledger.png")
+                  "stairs.csv", "summary.json", "fig_burst_c.png", "fig_burst_ke.png",
+                  "fig_burst_strain.png", "fig_burst_ledger.png", "fig_burst_anatomy.png")
     for r in rows:
         print(f"R = {r['ratio']:g}, f = {r['start_fraction']:g}, {r['switch']} (c at rest "
               f"{r['c_switch'] / 1e3:.2f} kPa, loaded {r['c_loaded'] / 1e3:.2f} kPa, + dc, eta "
@@ -229,7 +233,7 @@ def cmd_bench(a):
                 rounds=a.rounds)
     for k, v in res.items():
         if k != "ledger_cost":
-            print(f"{k}: {v}")
+            print(f"{k}: {fmt(v, '.4g') if isinstance(v, float) else v}")
     print(f"ledger_cost: {res['ledger_cost']:.3f} (a step's time with the energy ledger over "
           "without it)")
     print(f"particle-steps/s: {res['particle_steps_per_s_auto']:.4g}")
@@ -245,7 +249,8 @@ def cmd_calibrate(a):
                         confining=a.confining, eps_max=a.eps_max,
                         post_peak_strain=a.post_peak_strain, smooth=a.smooth,
                         workers=a.workers, scheduler=a.scheduler, resume=a.resume,
-                        stage=getattr(a, "stage", None), params_note=a.params_note)
+                        stage=getattr(a, "stage", None), params_note=a.params_note,
+                        verbose=not a.quiet)
     print(a.params_note)
     print("\n".join(s["verdict"]["text"]))
     print(f"calibrate: {s['evaluations']} evaluations ({s['run_now']} run now, "
@@ -263,7 +268,7 @@ def cmd_crosscheck(a):
                                 dem_domain=a.dem_domain, dem_params=a.dem_params,
                                 scheduler=a.scheduler, hmodel_params=a.hmodel_params,
                                 burst=not a.no_burst, burst_ratios=a.burst_ratios,
-                                burst_fractions=a.burst_fractions)
+                                burst_fractions=a.burst_fractions, verbose=not a.quiet)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
@@ -292,6 +297,7 @@ def build_parser() -> opt.Parser:
                     help="also save the first state at these absolute eta (comma-separated)")
     b.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz")
     b.add_argument("--no-vtk", action="store_true")
+    opt.add_quiet(b)
     b.add_argument("--threads", type=THREADS, default=None,
                     help="threads (results do not depend on it); default: auto, see dem.threads")
     b.set_defaults(func=cmd_biaxial)
@@ -348,6 +354,7 @@ def build_parser() -> opt.Parser:
     p.add_argument("--resume", action="store_true",
                     help="keep the runs already in DIR/probe_runs.jsonl (and DIR/stateR.npz) "
                         "and run only the missing ones")
+    opt.add_quiet(p)
     p.set_defaults(func=cmd_probes)
 
     d = sub.add_parser("domain", parents=[po],
@@ -364,6 +371,7 @@ def build_parser() -> opt.Parser:
                     help="leave the H-model's boundary out of the figure")
     d.add_argument("--resume", action="store_true",
                     help="keep the references and probe runs already in the output folder")
+    opt.add_quiet(d)
     d.set_defaults(func=cmd_domain)
 
     u = sub.add_parser("burst", parents=[eq], help="failure made to happen: the proportional strain path "
@@ -422,6 +430,7 @@ def build_parser() -> opt.Parser:
                         "default: auto")
     u.add_argument("--params", default=None,
                    help="DemParams file; refused unless it is the states' own")
+    opt.add_quiet(u)
     u.set_defaults(func=cmd_burst)
 
     q = sub.add_parser("params", help="write a DemParams file (the paper's set, or the options given)")
@@ -477,6 +486,7 @@ def build_parser() -> opt.Parser:
     k.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
     k.add_argument("--resume", action="store_true",
                    help="take every evaluation already in DIR/evaluations.jsonl, run the rest")
+    opt.add_quiet(k)
     k.set_defaults(func=cmd_calibrate)
 
     x = sub.add_parser("crosscheck", help="H-model, FE and DEM side by side (report.md + figures)")
@@ -514,6 +524,7 @@ def build_parser() -> opt.Parser:
     x.add_argument("--burst-fractions", type=opt.reals(0, 1), default=None,
                    help="start states of the burst section, fractions of each part's drained "
                         "peak eta, 0 < f < 1, among the DEM's saved ones (default 0.90)")
+    opt.add_quiet(x)
     x.set_defaults(func=cmd_crosscheck)
     return ap
 
@@ -535,8 +546,7 @@ def main(argv=None):
         if getattr(a, "hmodel_params", None):
             from hmodel.params import load_params as load_hparams
             load_hparams(a.hmodel_params, option="--hmodel-params")
-        if (a.cmd in ("probes", "domain", "calibrate", "crosscheck", "burst") and a.scheduler
-                and a.workers):
+        if getattr(a, "scheduler", None) and getattr(a, "workers", None):
             raise opt.OptionError("--workers and --scheduler: allowed one of them")
         if getattr(a, "scheduler", None):
             from .probes import check_scheduler

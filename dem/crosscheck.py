@@ -29,6 +29,10 @@ def _log(msg):
     print(f"[crosscheck] {msg}", file=sys.stderr, flush=True)
 
 
+def _silent(msg):
+    pass
+
+
 # -- the three parts ---------------------------------------------------------------------------
 def hmodel_part(eta_a=1.029, sigma2=200e3, alphas=None, domain_sigma2=(100e3, 200e3, 400e3),
                 n_dir=180, workers=None, params=None):
@@ -99,7 +103,7 @@ def comparison_state(refs, norm, alphas):
 
 def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, threads=None,
              alphas=None, max_steps=None, resume=False, domain=True, hmodel_boundary=None,
-             params=None, scheduler=None):
+             params=None, scheduler=None, verbose=True):
     """DEM: compaction, drained biaxial test with states saved along the path, their
     relaxation under stress control, and the directional analysis (default: the paper's 45
     directions, each twice) at the comparison state chosen by ``comparison_state``
@@ -113,6 +117,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     interrupted run in ``out_dir`` finished (the biaxial test or its checkpoint, the relaxed
     references, the probe runs already on disk).
     ``params``: DemParams of the sample (default: the paper's set); n and seed override it.
+    ``verbose``: progress lines on stderr.
     """
     from . import io
     from .domain import run_domain
@@ -122,6 +127,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     from .threads import set_default_threads
 
     set_default_threads(threads)
+    log = _log if verbose else _silent
     bdir = os.path.join(out_dir, "biaxial")
     summary_path = os.path.join(bdir, "summary.json")
     a_path = os.path.join(bdir, "stateA.npz")
@@ -133,14 +139,14 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
         rows = [[r[c] for c in COLUMNS] for r in io.read_csv(os.path.join(bdir, "biaxial.csv"))[1]]
         res = BiaxialResult(rows, a_path, bool(summ["eta_a_reached"]), summ.get("compaction", {}),
                             float(summ["wall_time"]))
-        _log(f"DEM: biaxial test taken from {bdir} ({len(rows)} rows)")
+        log(f"DEM: biaxial test taken from {bdir} ({len(rows)} rows)")
     else:
         # the states along the path; 1.0 (the peak, above what constant stress holds)
         # brackets eta_lim from above
         P = (params or DemParams()).replace(n=n, seed=seed)
         res = run_biaxial(P, bdir, rate=rate, eta_a=eta_a, vtk=False,
                           resume=resume, save_fractions=SAVE_FRACTIONS + (1.0,),
-                          save_etas=(ETA2_OF_P3,))
+                          save_etas=(ETA2_OF_P3,), verbose=verbose)
     opts = ProbeOptions() if max_steps is None else ProbeOptions(max_steps=int(max_steps))
     alphas = directions() if alphas is None else [float(a) for a in alphas]
     t_probes0 = time.time()
@@ -149,7 +155,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     def choose(refs):
         name, info = comparison_state(refs, opts.norm, alphas)
         chosen.update(info)
-        _log(f"DEM: comparison state {name} (eta_R {info['eta_R']:.4f}, largest probe increment "
+        log(f"DEM: comparison state {name} (eta_R {info['eta_R']:.4f}, largest probe increment "
              f"{info['max_eta_increment']:.4f}, largest eta held {info['eta_held_max']:.4f}; "
              f"rule met: {info['rule_met']})")
         return [nm for nm, _, oc, _ in refs if domain and oc == "equilibrium"] + [name]
@@ -158,7 +164,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     drows, bounds, probes_by = run_domain(bdir, ddir, alphas=alphas, opts=opts, workers=workers,
                                           scheduler=scheduler, resume=resume,
                                           hmodel=hmodel_boundary or False,
-                                          choose=choose)
+                                          choose=choose, verbose=verbose)
     probes = probes_by[chosen["state"]]
     stages = {"compaction + biaxial test (when it ran)": res.wall_time,
               "relaxations and probes (this run)": time.time() - t_probes0}
@@ -292,13 +298,81 @@ def _angle_axes(ax):
     ax.legend(fontsize=8)
 
 
+# how a DEM probe without a W2 is drawn (on W2 = 0): (outcome, marker, colour, label)
+OUTCOME_MARKS = (("failure", "^", "C3", "DEM failure (runaway)"),
+                 ("undecided", "s", "C7", "DEM undecided (cap)"))
+
+
+def polar_figure(path, h, rows, dem_title="DEM (Fig. 15)"):
+    """fig_polar_w2.png: the H-model at A (``h``: ``hmodel_part``'s, its sweep and, if any, its
+    stress probes in the DEM's directions) and the DEM's probes (``rows``: probes.csv rows, or
+    None) in the paper's polar diagram (``hmodel.plots``), each with its cone (H-model: W2 <= 0;
+    DEM: failure or W2 <= 0) shaded and its angles written and its plastic zone at the rim, and,
+    where the H-model's cone is narrow, a third panel of W2 against alpha_sigma around it with
+    both parts. A DEM W2 is drawn only for an equilibrium probe (clipped to [-0.5, 1.1])."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hmodel.io import save_figure
+    from hmodel.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes, polar_series
+    from hmodel.probes import arcs
+    rmax = 1.6
+    sw = h["sweep"]
+    cone_h, plastic_h = arcs(sw.alpha_sigma, sw.w2 <= 0), arcs(sw.alpha_sigma, sw.plastic)
+    series_h = [("H-model W2 (strain-probe sweep)", sw.alpha_sigma, sw.w2, "C3-")]
+    if "stress_probes" in h:
+        sp = h["stress_probes"]
+        series_h.append(("H-model, DEM directions", sp.probe.alpha_sigma, sp.probe.w2, "ko"))
+    zoom = needs_zoom(cone_h)
+    fig = plt.figure(figsize=(17.5 if zoom else 12, 6.9))
+    gs = fig.add_gridspec(1, 3 if zoom else 2, width_ratios=[1, 1, 0.95] if zoom else [1, 1])
+    ax = fig.add_subplot(gs[0, 0], projection="polar")
+    polar_axes(ax, rmax)
+    mark_plastic(ax, plastic_h, rmax)
+    mark_cone(ax, cone_h, rmax)
+    polar_series(ax, series_h, rmax)
+    ax.set_title("H-model at A (Fig. 8)", pad=28)
+    axes = [ax]
+    series_d = []
+    ax = fig.add_subplot(gs[0, 1], projection="polar")
+    polar_axes(ax, rmax)
+    if rows:
+        outc = np.array([r["outcome"] for r in rows])
+        a = np.array([float(r["alpha_sigma"]) for r in rows])
+        eq = outc == "equilibrium"
+        w = np.array([float(r["w2"]) if e else np.nan for r, e in zip(rows, eq)])
+        cone_d = arcs(a, (outc == "failure") | (eq & (np.nan_to_num(w, nan=1.0) <= 0)))
+        mark_plastic(ax, arcs(a, np.array([bool(r["plastic"]) for r in rows]) & eq), rmax)
+        mark_cone(ax, cone_d, rmax, label=r"failure or $W_2 \leq 0$")
+        o = np.argsort(a)
+        loop_a, loop_w = np.append(a[o], a[o][0] + 360.0), np.append(w[o], w[o][0])
+        series_d.append((f"DEM W2 ({len(rows)} stress probes; clipped to [-0.5, 1.1])", loop_a,
+                         np.clip(loop_w, -0.5, rmax - 0.5), "C0o-"))
+        for kind, m, col, lab in OUTCOME_MARKS:
+            sel = outc == kind
+            if sel.any():
+                series_d.append((lab, a[sel], np.zeros(sel.sum()), col + m))
+        polar_series(ax, series_d, rmax)
+        if not cone_d:
+            ax.plot([], [], " ", label=r"every probe settled with $W_2 > 0$")
+    ax.set_title(dem_title, pad=28)
+    axes.append(ax)
+    for ax in axes:
+        ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2,
+                  frameon=False)
+    if zoom:
+        cone_zoom(fig.add_subplot(gs[0, 2]), series_h + series_d, cone_h, plastic_h, pad_deg=15.0)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
 def _figures(out, h, dem, fem):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from hmodel.io import save_figure
-    from hmodel.plots import polar_axes
 
     figs = {}
     sw = h["sweep"]
@@ -313,24 +387,13 @@ def _figures(out, h, dem, fem):
     state_note = (f", state {dem['comparison']['state']} (eta {dem['comparison']['eta_R']:.3f})"
                   if dem else "")
 
-    def outcome_marks(ax, polar_plot=False):
+    def outcome_marks(ax):
         """Failures (ran away: W2 <= 0 in the limit) as red triangles on W2 = 0, undecided
         probes as grey squares on W2 = 0."""
-        for kind, m, col, lab in (("failure", "^", "C3", "DEM failure (runaway)"),
-                                  ("undecided", "s", "0.6", "DEM undecided (cap)")):
+        for kind, m, col, lab in OUTCOME_MARKS:
             sel = outc == kind
-            if not sel.any():
-                continue
-            if polar_plot:
-                polar(ax, a_dem[sel], np.zeros(sel.sum()), m, lab)
-                ax.lines[-1].set_color(col)
-            else:
+            if sel.any():
                 ax.plot(a_dem[sel], np.zeros(sel.sum()), m, color=col, label=lab)
-
-    def polar(ax, a_deg, w, style, label):
-        a = np.radians(np.asarray(a_deg, float))
-        r = 0.5 + np.asarray(w, float)
-        ax.plot(r * np.cos(a), r * np.sin(a), style, label=label, ms=4, lw=1.2)
 
     # stress-strain (Figs. 4-5 and 13-14)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.3), constrained_layout=True)
@@ -377,24 +440,8 @@ def _figures(out, h, dem, fem):
     save_figure(fig, os.path.join(out, figs["stress_strain"]))
 
     # polar W2 (Figs. 8 and 15)
-    fig, axs = plt.subplots(1, 2, figsize=(11, 5.6), constrained_layout=True)
-    for ax in axs:
-        polar_axes(ax, rmax=1.6)
-    polar(axs[0], sw.alpha_sigma[o], sw.w2[o], "C3-", "H-model W2 (strain-probe sweep)")
-    if "stress_probes" in h:
-        sp = h["stress_probes"]
-        polar(axs[0], sp.probe.alpha_sigma, sp.probe.w2, "ko", "H-model, DEM directions")
-    axs[0].set_title("H-model at A (Fig. 8)")
-    if rows:
-        a = [r["alpha_sigma"] for r in rows] + [rows[0]["alpha_sigma"]]
-        polar(axs[1], a, np.clip(conv("w2") + conv("w2")[:1], -0.5, 1.1), "C0o-",
-              f"DEM W2 ({len(rows)} stress probes; clipped to [-0.5, 1.1])")
-        outcome_marks(axs[1], polar_plot=True)
-    axs[1].set_title(f"DEM (Fig. 15){state_note}")
-    for ax in axs:
-        ax.legend(fontsize=8, loc="upper left")
     figs["polar_w2"] = "fig_polar_w2.png"
-    save_figure(fig, os.path.join(out, figs["polar_w2"]))
+    polar_figure(os.path.join(out, figs["polar_w2"]), h, rows, f"DEM (Fig. 15){state_note}")
 
     # micro against macro (Fig. 16, and the H-model identity)
     fig, axs = plt.subplots(1, 2, figsize=(11, 4.3), constrained_layout=True)
@@ -596,7 +643,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
                    fem_mesh=(4, 8), fem_n_dir=72, domain=True, dem_alphas=None,
                    dem_max_steps=None, threads=None, resume=False, dem_domain=None,
                    dem_params=None, scheduler=None, hmodel_params=None, burst=True,
-                   burst_ratios=None, burst_fractions=None):
+                   burst_ratios=None, burst_fractions=None, verbose=True):
     """Run all three parts and write figures, conclusions.json and report.md in ``out_dir``.
 
     Default: 1000 disks at 0.05/s (minutes); ``full``: the paper's 12,000 disks at 0.01/s.
@@ -613,6 +660,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     ``burst``: the burst section (``dem.crosscheck_burst``): the proportional strain paths of
     ``burst_ratios`` (default -2) from ``burst_fractions`` (default 0.90) of each part's drained
     peak, c held below and past its peak, in the H-model, the FE specimen and the DEM sample.
+    ``verbose``: progress lines on stderr.
     """
     from hmodel.io import atomic_open
 
@@ -627,21 +675,22 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     rate = dflt["rate"] if rate is None else float(rate)
     dem_max_steps = dflt["max_steps"] if dem_max_steps is None else int(dem_max_steps)
     timings = {}
+    log = _log if verbose else _silent
     t = time.time()
-    _log("H-model: drained path, point A, directional analysis, bifurcation domain")
+    log("H-model: drained path, point A, directional analysis, bifurcation domain")
     h = hmodel_part(alphas=directions() if dem_alphas is None else list(dem_alphas),
                     domain_sigma2=(100e3, 200e3, 400e3) if domain else (), workers=workers,
                     params=H)
     timings["H-model (path, probes, domain)"] = time.time() - t
     t = time.time()
-    _log(f"FE: {fem_mesh[0]} x {fem_mesh[1]} quads, n_dir {fem_n_dir}")
+    log(f"FE: {fem_mesh[0]} x {fem_mesh[1]} quads, n_dir {fem_n_dir}")
     fem = fem_part(os.path.join(out_dir, "fem"), nx=fem_mesh[0], ny=fem_mesh[1], n_dir=fem_n_dir,
                    params=H)
     timings["FE specimen"] = time.time() - t
     dem = None
     if not skip_dem:
         t = time.time()
-        _log(f"DEM: {n} disks, rate {rate}/s, 45 probes x 2")
+        log(f"DEM: {n} disks, rate {rate}/s, 45 probes x 2")
         hb = None
         for d in h.get("domain", []):
             if abs(d.sigma2 - 200e3) < 1.0:
@@ -652,7 +701,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
         dem = dem_part(os.path.join(out_dir, "dem"), n=n, seed=seed, rate=rate, workers=workers,
                        alphas=dem_alphas, max_steps=dem_max_steps, threads=threads,
                        resume=resume, domain=(not full) if dem_domain is None else dem_domain,
-                       hmodel_boundary=hb, params=P, scheduler=scheduler)
+                       hmodel_boundary=hb, params=P, scheduler=scheduler, verbose=verbose)
         n_runs = 2 * sum(len(r) for r in dem["probes_by_state"].values())
         timings[f"DEM ({n} disks: compaction, biaxial, {len(dem['domain_rows'])} relaxations, "
                 f"{n_runs} probe runs)"] = time.time() - t
@@ -666,7 +715,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
                                ratios=tuple(burst_ratios or cb.BURST_RATIOS),
                                fractions=tuple(burst_fractions or cb.BURST_FRACTIONS),
                                fem_mesh=fem_mesh, fem_n_dir=fem_n_dir, dem_rate=rate,
-                               workers=workers, log=_log)
+                               workers=workers, log=log, verbose=verbose)
         timings["burst (H-model, FE, DEM)"] = time.time() - t
     c = conclusions(h, dem["probes"] if dem else None, fem, dem)
     figs = _figures(out_dir, h, dem, fem)

@@ -49,8 +49,10 @@ def _rows(rows, keys=("ratio", "start_fraction", "switch", "eta_start", "eta_pea
 
 
 def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BURST_FRACTIONS,
-               fem_mesh=(4, 8), fem_n_dir=72, dem_rate=0.01, workers=None, log=print) -> dict:
-    """Run the three parts' burst experiments into ``out_dir``/burst/{hmodel,fem,dem}.
+               fem_mesh=(4, 8), fem_n_dir=72, dem_rate=0.01, workers=None, log=print,
+               verbose=True) -> dict:
+    """Run the three parts' burst experiments into ``out_dir``/burst/{hmodel,fem,dem}
+    (``log``: the section's progress lines; ``verbose``: the DEM's own).
     ``dem_biaxial_dir``: a ``dem biaxial`` folder with its states (None: no DEM part).
     Returns {part: {"rows": burst rows (dicts), "histories": E_c per volume against time,
     "eta_peak": the part's drained peak eta}}."""
@@ -88,7 +90,7 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
         log(f"burst: DEM sample of {dem_biaxial_dir}")
         ddir = os.path.join(out_dir, "burst", "dem")
         rows, summ = dem_burst(dem_biaxial_dir, ddir, list(ratios), list(fractions),
-                               BurstOptions(rate=dem_rate), workers=workers, verbose=True)
+                               BurstOptions(rate=dem_rate), workers=workers, verbose=verbose)
         st, _ = io.load_state(os.path.join(dem_biaxial_dir, "states", f"state_f{fractions[0]:.3f}.npz"))
         vol = (st.walls[1] - st.walls[0]) * (st.walls[3] - st.walls[2]) * st.params.thickness
         out["dem"] = {"rows": _rows(rows), "eta_peak": summ["drained_eta_peak"],
@@ -132,13 +134,16 @@ def burst_conclusions(parts: dict, eta_first_w2: float | None, fem_events: dict 
 
 def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
     """E_c per volume [J/m^3] against the time since the switch [s], log axes, the three parts on
-    one figure (colour: part; solid: past, dashed: below; the end marked by the outcome)."""
+    one figure (colour: part; solid: past, dashed: below; the end marked by the outcome, as in
+    ``hmodel.plots.fig_burst_ke``; the legend beside the axes)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from hmodel.io import save_figure
+    from hmodel.plots import END_MARK
     color = {"hmodel": "C0", "fem": "C1", "dem": "C3"}
     fig, ax = plt.subplots(figsize=(7.5, 5))
+    ends = set()
     for part, p in parts.items():
         ax.plot([], [], "-", color=color[part], label=LABEL[part])
         for h in p["histories"]:
@@ -151,19 +156,20 @@ def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
             row = next((r for r in p["rows"] if (r["ratio"], r["start_fraction"], r["switch"])
                         == (h["ratio"], h["start_fraction"], h["switch"])), None)
             if row is not None:
-                ax.plot(t[ok][-1], ke[ok][-1], "x" if row["outcome"] == "failure" else "o",
-                        color=color[part], ms=7)
+                m, fc, _ = END_MARK.get(row["outcome"], END_MARK["undecided"])
+                ax.plot(t[ok][-1], ke[ok][-1], m, mec="k", mfc=fc, ms=8, mew=1.4, zorder=5)
+                ends.add(row["outcome"])
     ax.plot([], [], "k-", label="past the c peak (burst expected)")
     ax.plot([], [], "k--", label="below the c peak (equilibrium expected)")
-    ax.plot([], [], "kx", ls="none", label="end: failure")
-    ax.plot([], [], "ko", ls="none", label="end: equilibrium")
+    for m, fc, lab in (v for k, v in END_MARK.items() if k in ends):
+        ax.plot([], [], m, ls="none", mec="k", mfc=fc, ms=8, mew=1.4, label=lab)
     ax.set_xlabel("time since the switch to c control [s]")
     ax.set_ylabel(r"kinetic energy per volume $E_c/V$ [J/m$^3$]")
     ax.set_title("The burst of kinetic energy (Eq. 1): c = s1 + R s2 held below / past its peak,\n"
                  "from rest (DEM: the disks with two contacts or more, a dead load on the walls)",
                  fontsize=9)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)   # off the data
     save_figure(fig, os.path.join(out, name))
     return name
 

@@ -492,6 +492,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=opt.integer(0), default=0, help="seed of the starts")
     ap.add_argument("--n-dir", type=opt.integer(8), default=180, help="hexagon orientations of the H-model")
     ap.add_argument("--n", type=opt.integer(8), default=360, help="strain directions of each sweep")
+    opt.add_quiet(ap)
 
     def run(args, stage):
         for f in ("biaxial.csv", "domain12000/domain.csv", "domain12000/boundaries.json",
@@ -501,10 +502,11 @@ def main(argv=None) -> int:
                                       "its domain (docs/gallery/full)")
         opt.check_out_dir(args.out)
         t0 = time.time()
-        common = ["--n-dir", str(args.n_dir)]
+        log = (lambda m: None) if args.quiet else _log
+        common = ["--n-dir", str(args.n_dir)] + (["--quiet"] if args.quiet else [])
         argv_fit = ["fit", "--data", os.path.join(args.dem, "biaxial.csv"), "--out", args.out,
                     "--starts", str(args.starts), "--seed", str(args.seed), *common]
-        _log("python -m hmodel " + " ".join(argv_fit))
+        log("python -m hmodel " + " ".join(argv_fit))
         stage.at("the fit")
         code = cli.main(argv_fit)
         if code != 0:
@@ -520,15 +522,15 @@ def main(argv=None) -> int:
         eta_a = float(f_a * e.max())
         pargs = param_argv(P) + ["--sigma2", repr(P.p0)]
         for sub, extra in (("probes", ["--eta", repr(eta_a), "--n", str(args.n)]), ("domain", ["--n", "180"])):
-            argv_ = [sub, *extra, *pargs, "--out", os.path.join(args.out, sub)]
-            _log("python -m hmodel " + " ".join(argv_))
+            argv_ = [sub, *extra, *pargs, "--out", os.path.join(args.out, sub)] + common[2:]
+            log("python -m hmodel " + " ".join(argv_))
             stage.at(f"python -m hmodel {sub}")
             code = cli.main(argv_)
             if code != 0:
                 return code
             stage.wrote(f"{sub}/")
         stage.at("the comparison")
-        c = compare(P, rows, bounds, dem_probes, n=args.n, progress=_log)
+        c = compare(P, rows, bounds, dem_probes, n=args.n, progress=log)
         dem_curve = read_csv(os.path.join(args.dem, "biaxial.csv"))
         kd = int(np.argmax(dem_curve["q"]))
         c["dem_q_peak"], c["dem_eps1_peak"] = float(dem_curve["q"][kd]), float(dem_curve["eps1"][kd])

@@ -564,29 +564,41 @@ def plot_probes(rows, out_dir, note=""):
     [0, RMAX] with clipped points marked.  Only equilibrium probes have a W2 (Eq. 15 needs
     equilibrium at both ends) and are joined by the curves; failures (the sample ran away:
     W2 <= 0 in the limit, Eq. 1) are red triangles on the W2 = 0 circle; undecided probes are
-    grey dots at their last W2.  ``note``: sample, pressure and rate for the title."""
+    grey dots at their last W2.  Fig. 15 shades the cone (the probed directions that failed or
+    settled with W2 <= 0) with its angles, marks the plastic zone at the rim and, where the cone
+    is narrow, adds W2 against alpha_sigma around it (``hmodel.plots``).  ``note``: sample,
+    pressure and rate for the title."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from hmodel.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes
+    from hmodel.probes import arcs
     figs = (("fig15_w2.png", [("w2", r"$W_2$ macro")], r"Normalized second-order work $W_2$"),
             ("fig16_w2_micro.png", [("w2", r"$W_2$ macro"),
                                     ("w2_micro", r"micro $\sum d\mathbf{f}\cdot d\mathbf{l}\,/\,(V|d\sigma||d\varepsilon|)$")],
              "Macro vs micro second-order work"),
             ("fig17_w2_nt.png", [("w2n", r"$W_2^n$ (normal)"), ("w2t", r"$W_2^t$ (tangential)")],
              "Normal and tangential parts of the micro $W_2$"))
-    th = np.linspace(0, 2 * np.pi, 200)
     outc = np.array([r["outcome"] for r in rows])
-    a_all = np.radians([r["alpha_sigma"] for r in rows])
+    alpha = np.array([float(r["alpha_sigma"]) for r in rows])
+    a_all = np.radians(alpha)
     eq = outc == "equilibrium"
+    fail = outc == "failure"
+    w2_eq = np.array([float(r["w2"]) if e else np.nan for r, e in zip(rows, eq)])
+    # the cone: the probed directions that ran away or settled with W2 <= 0; the plastic zone
+    cone = arcs(alpha, fail | (eq & (np.nan_to_num(w2_eq, nan=1.0) <= 0)))
+    plastic = arcs(alpha, np.array([bool(r["plastic"]) for r in rows], bool) & eq)
     # closed loop over every direction; NaN where no equilibrium, so the curve breaks there
     loop = np.append(np.arange(len(rows)), 0) if rows else np.array([], int)
     for name, series, title in figs:
-        fig = plt.figure(figsize=(6, 6.4))
-        ax = fig.add_subplot(projection="polar")
-        ax.set_ylim(0, RMAX)
-        ax.set_yticks([0.5, 1.0, 1.5, 2.0])
-        ax.set_yticklabels(["0", "0.5", "1", "1.5"], fontsize=7)   # ticks read as W2
-        ax.plot(th, np.full_like(th, 0.5), "--", color="gray", lw=0.8, label=r"$W_2 = 0$")
+        zoom = name == "fig15_w2.png" and needs_zoom(cone)
+        fig = plt.figure(figsize=(12, 6.4) if zoom else (6, 6.4))
+        ax = fig.add_subplot(1, 2 if zoom else 1, 1, projection="polar")
+        polar_axes(ax, RMAX)
+        if name == "fig15_w2.png":
+            mark_plastic(ax, plastic, RMAX)
+            mark_cone(ax, cone, RMAX, label=r"failure or $W_2 \leq 0$")
         for j, (k, lab) in enumerate(series):
             w = np.array([float(r[k]) for r in rows])
             rad, clip = polar_radius(np.where(eq, w, np.nan))
@@ -598,19 +610,20 @@ def plot_probes(rows, out_dir, note=""):
             if und.any():
                 ax.plot(a_all[und], polar_radius(w[und])[0], "o", color="0.6", ms=4,
                         label="undecided (at the cap)" if j == 0 else None)
-        pl = np.array([bool(r["plastic"]) for r in rows], bool) & eq
-        if name == "fig15_w2.png" and pl.any():
-            w = np.array([float(r["w2"]) for r in rows])
-            ax.plot(a_all[pl], polar_radius(w[pl])[0], "x", color="C3", label="plastic")
-        fail = outc == "failure"
         if fail.any():
             ax.plot(a_all[fail], np.full(fail.sum(), 0.5), "^", color="C3", ms=7,
                     label=r"failure (runaway: $W_2 \leq 0$)")
-        ax.set_title(f"{title}{' - ' + note if note else ''}\nangle: $\\alpha_\\sigma$ "
-                     r"($\tan\alpha_\sigma = d\sigma_1/d\sigma_2$), radius: $0.5 + W_2$",
-                     fontsize=9)
-        fig.legend(loc="lower center", ncol=3, fontsize=7, frameon=False)
-        fig.tight_layout(rect=(0, 0.1, 1, 1))
+        fig.suptitle(f"{title}{' - ' + note if note else ''}", fontsize=10)
+        ax.set_title(r"angle: $\alpha_\sigma$ ($\tan\alpha_\sigma = d\sigma_1/d\sigma_2$), "
+                     r"radius: $0.5 + W_2$", fontsize=8, pad=24)
+        if zoom:
+            cone_zoom(fig.add_subplot(1, 2, 2),
+                      [(r"$W_2$ macro (equilibrium)", alpha, w2_eq, "o-"),
+                       (r"failure (no $W_2$: drawn at 0)", alpha[fail], np.zeros(fail.sum()), "C3^")],
+                      cone, plastic, pad_deg=20.0, label=r"failure or $W_2 \leq 0$")
+        fig.legend(*ax.get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7,
+                   frameon=False)
+        fig.tight_layout(rect=(0, 0.1, 1, 0.97))
         tmp = os.path.join(out_dir, ".tmp-" + name)
         fig.savefig(tmp, dpi=120, format="png")
         plt.close(fig)

@@ -75,6 +75,11 @@ def equilibrate(sim: Simulation, target, stress_tol, unbalanced_tol, max_steps, 
             progress(steps, s, ub)
 
 
+def _kpa(s) -> str:
+    """'(200.0, 200.0) kPa' of wall stresses (sx, sy) [Pa]."""
+    return f"({s[0] / 1e3:.1f}, {s[1] / 1e3:.1f}) kPa"
+
+
 def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.01,
             unbalanced_tol=1e-3, max_steps=3_000_000, compaction_damping=0.3,
             compaction_vmax=1.0, target_porosity=0.16, grow_step=0.005, grow_steps=500,
@@ -111,7 +116,7 @@ def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.
             return None
         def f(steps, s, ub):
             if steps % 20000 == 0:
-                print(f"[compact {tag}] step {steps} s=({s[0]:.4g},{s[1]:.4g}) Pa "
+                print(f"[compact {tag}] step {steps} s={_kpa(s)} "
                       f"unbalanced={ub:.2e} porosity={sim.porosity():.4f}", file=sys.stderr)
         return f
 
@@ -127,7 +132,7 @@ def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.
     grown = n_grow * grow_steps
     if verbose:
         print(f"[compact] radii grown from {s0:.3f} in {grown} steps, porosity="
-              f"{sim.porosity():.4f}, stress={sim.wall_stress()}", file=sys.stderr)
+              f"{sim.porosity():.4f}, stress={_kpa(sim.wall_stress())}", file=sys.stderr)
     # the frictionless stage only has to densify: a 10x looser balance criterion (the
     # frictionless servo-controlled packing creeps slowly to 1e-3 for 12,000 disks); the
     # final state is checked with unbalanced_tol after the friction is restored
@@ -143,6 +148,6 @@ def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.
     sim.ref_len = sim.size.copy()
     rep = CompactionReport(sim.porosity(), (float(s[0]), float(s[1])), ub, st1 + st2, ok1 and ok2)
     if verbose:
-        print(f"[compact] porosity={rep.porosity:.4f} stress={rep.stress} unbalanced={ub:.2e} "
+        print(f"[compact] porosity={rep.porosity:.4f} stress={_kpa(rep.stress)} unbalanced={ub:.2e} "
               f"steps={rep.steps} converged={rep.converged}", file=sys.stderr)
     return sim, rep

@@ -80,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
     g.add_argument("--n-sphere", type=opt.integer(1), default=d.n_sphere,
                    help="strain directions sampled for the local min of W2 (default %(default)s)")
-    g.add_argument("--quiet", action="store_true")
+    opt.add_quiet(g)
     _burst_parser(sub)
     return ap
 
@@ -121,7 +121,7 @@ def _burst_parser(sub):
                         "--d-eps1 is the drained path's)")
     g = _specimen_options(b, c.specimen, eps1_max=False)
     g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
-    g.add_argument("--quiet", action="store_true")
+    opt.add_quiet(g)
 
 
 def check_config(cfg: BiaxialConfig) -> None:
@@ -173,15 +173,18 @@ def _warm_specimen():
 
 def _warm_indicators():
     """Compile fem's own kernels on tiny cases: the specimen's (``_warm_specimen``), the local
-    indicators on one elastic point, the global check's banded kernels on 2 x 4 elements."""
+    indicators on one elastic point, the global check's banded kernels on 2 x 4 elements and
+    the permutation parity of its fallback (det K by LU when K_d is singular: without it that
+    kernel stayed uncompiled and every run announced a compilation)."""
     from hmodel import HParams
-    from .indicators import GlobalCheck, local_indicators
+    from .indicators import GlobalCheck, local_indicators, permutation_parity
     from .mesh import rectangle
     from .problem import Biaxial
     I = np.eye(2)
     D = (np.einsum("ij,kl->ijkl", I, I) + np.einsum("ik,jl->ijkl", I, I)
          + np.einsum("il,jk->ijkl", I, I))[..., None] * 1e6
     local_indicators(D, n_sphere=8)
+    permutation_parity(np.arange(2))
     _warm_specimen()
     b = Biaxial(rectangle(1.0, 2.0, 2, 4), HParams(n_dir=8))
     GlobalCheck(b)(b.stiffness(D[..., [0] * b.npts]))
@@ -224,10 +227,11 @@ def _run(args, stage) -> int:
     compile_kernels(extra=_fem_kernels(), warm=_warm_indicators)
 
     def progress(line):
-        if line.startswith("step"):
-            if not stage.written:      # row 0 is on disk: from now on every converged step is
-                stage.wrote("curve.csv, fields.xdmf and newton.log up to the last converged step")
-            stage.at("load " + " ".join(line.split(" q =")[0].split()))
+        if line.startswith("step") and not stage.written:
+            # row 0 is on disk: from now on every converged step is, and the line names the
+            # last one as curve.csv has it (a step's line comes once the next one has converged)
+            stage.wrote("curve.csv, fields.xdmf and newton.log up to the last converged step")
+            stage.at(lambda: _step_under_way(os.path.join(args.out, "curve.csv")))
         if not args.quiet:
             print(line, file=sys.stderr, flush=True)
 
@@ -252,6 +256,19 @@ def _run(args, stage) -> int:
           f"(update {t['update']:.1f} s, assembly {t['assembly']:.1f} s, solve {t['solve']:.1f} s, "
           f"indicators + output {t['indicators_output']:.1f} s); outputs in {args.out}")
     return 0
+
+
+def _step_under_way(curve_csv) -> str:
+    """'load step 93, after step 92 (eps1 = 0.9200 %), the last row of curve.csv', read from the
+    file when an interrupted run has closed it."""
+    from .output import read_curve
+    try:
+        c = read_curve(curve_csv)
+        k = int(c["step"][-1])
+    except (OSError, ValueError, KeyError, IndexError):
+        return "the load steps"
+    return (f"load step {k + 1}, after step {k} (eps1 = {100 * c['eps1'][-1]:.4f} %), the last "
+            "row of curve.csv")
 
 
 def _run_burst(args, stage) -> int:

@@ -225,17 +225,20 @@ def summarize(curve: dict, mp: dict | None) -> tuple[dict, dict]:
 
 
 def format_summary(summ: dict) -> str:
-    lines = ["criterion                                                       eps1 [%]    eta"]
+    """The table of the criteria: where each first fires (eps1 [%], eta), and the material
+    point's peak, in columns as wide as the longest label."""
+    mp = summ["material_point"]
+    mp_label = "material point (hmodel.driver, d_eps1 = 1e-5): peak of q"
+    w = max([len(e["label"]) for e in summ["events"].values()] + [len(mp_label)])
+    lines = [f"{'criterion':<{w + 2}s}  eps1 [%]     eta"]
     for key, e in summ["events"].items():
         if e["row"] is None:
-            lines.append(f"  {e['label']:<60s}  not reached")
+            lines.append(f"  {e['label']:<{w}s}  not reached")
         else:
-            lines.append(f"  {e['label']:<60s} {100 * e['eps1']:8.4f}  {e['eta']:.4f}")
-    mp = summ["material_point"]
+            lines.append(f"  {e['label']:<{w}s}  {100 * e['eps1']:8.4f}  {e['eta']:.4f}")
     if mp is not None:
         tag = "" if mp["peak_reached"] else " (not reached: end of the computed range)"
-        lines.append(f"  {'material point (hmodel.driver, d_eps1 = 1e-5): peak of q':<60s} "
-                     f"{100 * mp['eps1_peak']:8.4f}  {mp['eta_peak']:.4f}{tag}")
+        lines.append(f"  {mp_label:<{w}s}  {100 * mp['eps1_peak']:8.4f}  {mp['eta_peak']:.4f}{tag}")
     return "\n".join(lines)
 
 

@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 
 from hmodel.burst_rule import BurstRule, ke_growth
-from hmodel.io import atomic_write_bytes, save_figure
+from hmodel.io import atomic_write_bytes, fmt, save_figure
 from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
@@ -195,7 +195,8 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
            f"{sc.imp_size}, angle {sc.imp_angle})" if sc.imperfection else ", perfect specimen")
     say(f"fem burst: {prob.nel} elements, {prob.npts} points, n_dir {params.n_dir}{imp}; "
         f"sigma2 {sc.sigma2:g} Pa; R {', '.join(f'{r:g}' for r in cfg.ratios)}; f "
-        f"{', '.join(f'{f:g}' for f in cfg.start_fractions)}; dc {dc:g} Pa; density "
+        f"{', '.join(f'{f:g}' for f in cfg.start_fractions)}; dc {dc:g} Pa (held force step "
+        f"dG = B dc = {B * dc:.4g} N/m); density "
         f"{cfg.density:g} kg/m^3; damping ratio {cfg.damping_ratio:g}; {cfg.steps_per_period} "
         f"steps a period; d_eps1 {sc.d_eps1:g} (drained), {cfg.path_d_eps1:g} (paths)")
 
@@ -284,8 +285,8 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                     b = base
                     say(f"path R = {R:g}, f = {f:g}: c peak {b['c_peak'] / 1e3:.3f} kPa at eta "
                         f"{b['eta_peak_c']:.4f} (material point {b['mp_c_peak'] / 1e3:.3f} kPa at "
-                        f"eta {b['mp_eta_peak_c']:.4f}: {100 * b['c_peak_error']:+.3f} %, "
-                        f"{100 * b['eta_peak_error']:+.3f} %)")
+                        f"eta {b['mp_eta_peak_c']:.4f}: {fmt(100 * b['c_peak_error'], '+.3f')} %, "
+                        f"{fmt(100 * b['eta_peak_error'], '+.3f')} %)")
                 else:
                     say(f"path R = {R:g}, f = {f:g}: c does not peak within the path strain "
                         f"{cfg.path_strain}: one below run at its end")
@@ -401,9 +402,12 @@ def _tied_path(prob, start: Snapshot, ratio: float, cfg: BurstConfig, say):
         # no static state beyond under U1 prescribed: the path ends there, as at its strain
         end = str(e)
         say(f"path R = {ratio:g}: {e}")
+    its = st.times["iterations"]
     say(f"path R = {ratio:g}: {st.step} steps to eps1 = "
         f"{100 * (rows['eps1'][-1] - rows['eps1'][0]):.3f} % from the start, "
-        f"{st.times['iterations']} Newton iterations")
+        + (f"{its} Newton iterations" if its else
+           "every step converged at its predictor (the homogeneous increment is in "
+           "equilibrium: no Newton iteration needed)"))
     path = {k: np.array(v) for k, v in rows.items()}
     path["peak"] = peak.peak
     path["below"] = peak.below()
@@ -463,7 +467,7 @@ def _held_run(prob, M, snap: Snapshot, ratio: float, dG: float, cfg: BurstConfig
             u1 = float(m.z[-1])
             ke = 0.5 * float(m.v @ (system.M @ m.v))
             say(f"{_label(tag)}: step {k} t = {k / cfg.steps_per_period:.1f} T1 E_c = {ke:.3e} J/m "
-                f"dU1 = {u1:.3e} m W2_ext = {system.dG * u1:.3e} J/m "
+                f"dU1 = {u1:.3e} m W2_ext = dG dU1 = {system.dG * u1:.3e} J/m "
                 f"({time.perf_counter() - t0:.1f} s)")
 
     sc = cfg.specimen

@@ -208,7 +208,8 @@ def plot_mode(path, prob, u: np.ndarray, title: str = "") -> None:
     """Figure of a displacement mode u (ndofs,) of ``prob``: left, the mesh deformed along the
     mode (largest nodal displacement drawn as 8 % of the specimen width), elements coloured by
     the norm of the mode's strain (relative to its largest element value), the imperfection
-    outlined; right, the nodal arrows on the undeformed mesh."""
+    outlined (the title says "perfect specimen" when there is none); right, the nodal arrows on
+    the undeformed mesh, coloured by their length (relative to the largest), with its scale."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -221,21 +222,25 @@ def plot_mode(path, prob, u: np.ndarray, title: str = "") -> None:
     g = g / g.max()
     P, t = prob.mesh.p.T, prob.mesh.t.T
     amp = 0.08 * prob.width
-    fig, axs = plt.subplots(1, 2, figsize=(8, 6.2))
+    fig, axs = plt.subplots(1, 2, figsize=(9.5, 6.2))
     ax = axs[0]
     ax.add_collection(PolyCollection(P[t], facecolor="none", edgecolor="0.8", lw=0.4))
     pc = PolyCollection((P + amp * U)[t], array=g, cmap="viridis", edgecolor="k", lw=0.2)
     ax.add_collection(pc)
-    if len(prob.weak_elements):
+    weak = len(prob.weak_elements) > 0
+    if weak:
         ax.add_collection(PolyCollection(P[t[prob.weak_elements]], facecolor="none",
                                          edgecolor="C3", lw=0.8))
     fig.colorbar(pc, ax=ax, shrink=0.7, label="strain of the mode, |eps| / max")
-    ax.set_title(f"deformed along the mode (x {amp * 1e3:.1f} mm)\nred: imperfection", fontsize=8)
+    ax.set_title(f"deformed along the mode (x {amp * 1e3:.1f} mm)\n"
+                 + ("red outline: the imperfection" if weak else "perfect specimen"), fontsize=8)
     ax = axs[1]
     ax.add_collection(PolyCollection(P[t], facecolor="none", edgecolor="0.75", lw=0.4))
-    ax.quiver(P[:, 0], P[:, 1], U[:, 0], U[:, 1], np.linalg.norm(U, axis=1), cmap="plasma",
-              angles="xy", scale_units="xy", scale=1.0 / amp, width=0.004)
-    ax.set_title("nodal displacement of the mode", fontsize=8)
+    q = ax.quiver(P[:, 0], P[:, 1], U[:, 0], U[:, 1], np.linalg.norm(U, axis=1), cmap="plasma",
+                  angles="xy", scale_units="xy", scale=1.0 / amp, width=0.004)
+    q.set_clim(0.0, 1.0)
+    fig.colorbar(q, ax=ax, shrink=0.7, label="nodal displacement of the mode, |u| / max")
+    ax.set_title(f"nodal displacement of the mode (arrows x {amp * 1e3:.1f} mm)", fontsize=8)
     for ax in axs:
         ax.set_aspect("equal")
         ax.autoscale_view()

@@ -20,7 +20,7 @@ from . import plots
 from .driver import MixedControlError
 from .experiment import (DOMAIN_COLUMNS, DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test,
                          bifurcation_domain, compile_kernels, probe_columns, state_at_eta)
-from .io import atomic_open, json_safe, write_csv, write_table
+from .io import atomic_open, fmt, json_safe, write_csv, write_table
 from .options import add_param_options, params_from, record_params
 from .params import ParamError, save_params
 from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
@@ -57,6 +57,7 @@ def _start(args, stage, text):
     from the timings), and say what starts. Returns the start time of the timings."""
     opt.check_out_dir(args.out)
     compile_kernels()
+    stage.quiet = args.quiet
     _say(stage, text)
     return time.time()
 
@@ -74,7 +75,6 @@ def cmd_biaxial(args, stage):
     if args.eps1_max >= 1.0:
         raise opt.OptionError(f"--eps1-max {args.eps1_max:g} is out of range: allowed 0 < value < 1 "
                               "(the volume V0 det(I - eps) vanishes at eps1 = 1)")
-    stage.quiet = args.quiet
     t0 = _start(args, stage, f"drained biaxial test, sigma2 = {sigma2:g} Pa, to eps1 = {args.eps1_max:g}")
     note = f"python -m hmodel biaxial; {args.params_note}"
     try:
@@ -154,8 +154,9 @@ def cmd_probes(args, stage):
     plots.fig_probes(sw, pth("fig3_probes.png"))
     plots.fig_stress_components(sw, 0, pth("fig6_axial_components.png"))
     plots.fig_stress_components(sw, 1, pth("fig7_lateral_components.png"))
-    plots.fig_polar_w2([("H-model W2", sw.alpha_sigma, sw.w2, "C3-")], pth("fig8_polar_w2.png"),
+    plots.fig_polar_w2([("H-model W2", sw.alpha_sigma, sw.w2, "C0-")], pth("fig8_polar_w2.png"),
                        title=f"Normalized second-order work at A ($\\eta$ = {args.eta}) (Fig. 8)",
+                       cone=arcs(sw.alpha_sigma, sw.w2 <= 0), plastic=arcs(sw.alpha_sigma, sw.plastic),
                        no_solution=targets[sp.n_solutions == 0])
     plots.fig_w2_split(sw, pth("fig9_w2_split.png"))
     plots.fig_w2_normal_tangential(sw, pth("fig11_w2_normal_tangential.png"),
@@ -263,7 +264,7 @@ def cmd_burst(args, stage):
                                 f"$\\eta$ = {res.eta_peak:.4f})")
     plots.fig_burst_ke(res.histories, pth("fig_burst_ke.png"),
                        title=f"Material point (homogeneous specimen {args.width:g} x {args.height:g} m, "
-                             f"{args.density:g} kg/m$^3$, $\\zeta$ = {args.damping_ratio:g}): "
+                             f"{args.density:g} kg/m$^3$, $\\zeta$ = {args.damping_ratio:g}):\n"
                              f"kinetic energy after the switch, c held at c_switch + {args.dc:g} Pa")
     plots.fig_burst_residual(res.histories, pth("fig_burst_residual.png"))
     stage.wrote("fig_burst_paths.png", "fig_burst_ke.png", "fig_burst_residual.png")
@@ -278,12 +279,14 @@ def cmd_burst(args, stage):
     stage.wrote("summary.json")
     print(args.params_note)
     print(f"drained peak eta = {res.eta_peak:.4f} at sigma2 = {args.sigma2:g} Pa"
-          + (f"; first W2 = 0 of the directional analysis at eta = {cone['eta_first_w2']:.4f}"
-             if cone else ""))
+          + (f"; first W2 = 0 of the directional analysis at eta = "
+             f"{fmt(cone['eta_first_w2'], '.4f', 'never (before the peak)')}" if cone else ""))
+    # eta_peak_c: none where c does not peak within --path-strain (one below run, at its end)
     print("    R  start  eta_start  eta_peak_c  (fraction)  switch  static  outcome      E_c growth")
     for r in res.rows:
+        frac = f"({fmt(r['fraction_peak_c'], '.3f')})" if np.isfinite(r["eta_peak_c"]) else ""
         print(f"{r['ratio']:5g}  {r['start_fraction']:5g}  {r['eta_start']:9.4f}  "
-              f"{r['eta_peak_c']:10.4f}  ({r['fraction_peak_c']:.3f})    {r['switch']:6s}  "
+              f"{fmt(r['eta_peak_c'], '10.4f')}  {frac:7s}     {r['switch']:6s}  "
               f"{'yes' if r['static_solution'] else 'none':6s}  {r['outcome']:11s}  {r['ke_growth']:.3g}")
     if cone.get("cone_at_first_w2"):
         ca = cone["cone_at_first_w2"]
@@ -292,8 +295,10 @@ def cmd_burst(args, stage):
               + (f", i.e. the proportional paths of R in [{rr[0]:.3f}, {rr[1]:.3f}]" if rr else ""))
     if cone:
         for R, ce in cone["paths"].items():
-            print(f"R = {R}: strain direction alpha_eps = {ce['alpha_eps']:.2f} deg enters the cone "
-                  f"W2 <= 0 of the drained path at eta = {ce['eta']:.4f}")
+            where = (f"enters the cone W2 <= 0 of the drained path at eta = {ce['eta']:.4f}"
+                     if np.isfinite(ce["eta"]) else
+                     "never enters the cone W2 <= 0 of the drained path before its peak")
+            print(f"R = {R}: strain direction alpha_eps = {ce['alpha_eps']:.2f} deg {where}")
     worst = max(r["energy_residual"] for r in res.rows) if res.rows else 0.0
     print(f"energy balance: largest relative residual of a step {worst:.2e} (bound 1e-6)")
     print(f"wrote {args.out}/burst.csv, history.csv, paths.csv, params.json, summary.json, fig_burst_*.png "
@@ -314,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step [-]")
     b.add_argument("--eta-a", type=R(0, 2), default=1.029, help="stress ratio of point A (marked)")
     b.add_argument("--out", default="out/hmodel", help="output folder")
-    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    opt.add_quiet(b)
     add_param_options(b)
     b.set_defaults(func=cmd_biaxial)
 
@@ -331,6 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stress-probe spacing [deg]")
     p.add_argument("--sigma-norm", type=R(0, unit="Pa"), default=2.5e3, help="stress probe norm [Pa]")
     p.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_quiet(p)
     add_param_options(p)
     p.set_defaults(func=cmd_probes)
 
@@ -343,6 +349,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--workers", type=opt.integer(1), default=None,
                    help="parallel processes, >= 1 (default: min(pressures, cores))")
     d.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_quiet(d)
     add_param_options(d)
     d.set_defaults(func=cmd_domain)
 
@@ -374,6 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the directional analysis (where each path's strain direction enters "
                         "the cone W2 <= 0; the first W2 = 0 of the drained path)")
     u.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_quiet(u)
     add_param_options(u)
     u.set_defaults(func=cmd_burst)
 
@@ -401,7 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="residual evaluations per start (each Jacobian costs 2 more model paths "
                         "per free parameter)")
     f.add_argument("--out", default="out/fit", help="output folder")
-    f.add_argument("--quiet", action="store_true", help="no progress lines")
+    opt.add_quiet(f)
     add_param_options(f)
     f.set_defaults(func=cmd_fit)
 
@@ -474,9 +482,10 @@ def cmd_domain(args, stage):
     stage.wrote("summary.json")
     plots.fig_domain(pts, os.path.join(args.out, "fig10_domain.png"))
     print(note)
+    pq = lambda p, q: (f"(p, q) = ({p:.4g}, {q:.4g}) Pa" if np.isfinite(p) else "never before the peak")
     for d in pts:
-        print(f"sigma2 = {d.sigma2:g} Pa: first W2<=0 at (p, q) = ({d.p_w2:.4g}, {d.q_w2:.4g}), "
-              f"W2_sigma<=0 at ({d.p_w2sigma:.4g}, {d.q_w2sigma:.4g}), peak ({d.p_peak:.4g}, {d.q_peak:.4g}) Pa")
+        print(f"sigma2 = {d.sigma2:g} Pa: first W2 <= 0 at {pq(d.p_w2, d.q_w2)}; first W2_sigma <= 0 "
+              f"at {pq(d.p_w2sigma, d.q_w2sigma)}; peak at {pq(d.p_peak, d.q_peak)}")
         if d.outcome != "complete":
             print(f"  the drained path at {d.sigma2:g} Pa ends {d.end}")
     print(f"wrote {args.out}/domain.csv, params.json, summary.json, fig10_domain.png ({t_run:.1f} s)")
@@ -504,7 +513,6 @@ def cmd_fit(args, stage):
     if args.d_eps1_search > e_max:
         raise opt.OptionError(f"--d-eps1-search {args.d_eps1_search:g} is out of range: allowed 0 < "
                               f"value <= {e_max:g} (the last eps1 of the data)")
-    stage.quiet = args.quiet
     t0 = _start(args, stage, f"fit of {', '.join(args.free)} to {args.data} ({curve.eps1.size} points, "
                 f"sigma2 = {curve.sigma2:.6g} Pa: {curve.sigma2_from}), {args.starts} starts")
     res = hfit.fit_curve(curve, P, args.free, args.bounds, n_starts=args.starts, seed=args.seed,

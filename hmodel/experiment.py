@@ -26,10 +26,10 @@ DOMAIN_EPS1_MAX = 0.2
 
 def compile_kernels(extra=(), warm=None, stream=None) -> float:
     """The first run after an install compiles the Numba kernels (a minute or more): if they are
-    not in Numba's cache, say so once ("compiling kernels, once: about a minute"), compile them
-    on a tiny case (n_dir = 8) and say how long it took, so that the timings a command reports
-    leave it out. ``extra``: more Numba functions to check, ``warm()``: compiles them.
-    Returns the compilation time [s] (0.0 when everything was cached)."""
+    not in Numba's cache, say so once (options.COMPILE_NOTICE: "compiling kernels, once: one to
+    two minutes"), compile them on a tiny case (n_dir = 8) and say how long it took, so that the
+    timings a command reports leave it out. ``extra``: more Numba functions to check,
+    ``warm()``: compiles them. Returns the compilation time [s] (0.0 when everything was cached)."""
     import sys
 
     from . import _kernels

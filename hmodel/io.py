@@ -1,14 +1,34 @@
-"""Atomic file output: a file is either absent or complete, never half-written."""
+"""Atomic file output: a file is either absent or complete, never half-written; and ``fmt``, a
+number of an output line as a reader takes it (no nan, no -0.000)."""
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 
 import numpy as np
 
 __all__ = ["atomic_open", "atomic_write_bytes", "write_csv", "write_table", "save_figure", "read_csv",
-           "file_mode", "json_safe"]
+           "file_mode", "json_safe", "fmt"]
+
+
+def fmt(value, spec="", missing="none") -> str:
+    """``format(value, spec)`` for an output line, or ``missing`` ("none", "never", ...) when
+    there is no such value (None, NaN, inf), right-aligned to the width of ``spec``; a value
+    that rounds to zero loses its sign ("-0.000" reads as a bug: it is 0.000 to the digits
+    shown)."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return format(value, spec)
+    x = None if value is None else float(value)
+    if x is None or not np.isfinite(x):
+        width = re.match(r"(?:.?[<>=^])?[-+ ]?#?0?(\d*)", spec).group(1)
+        return missing.rjust(int(width or 0))
+    text = format(x, spec)
+    mantissa = text.strip().lstrip("+-").split("e")[0]
+    if text.strip()[:1] in "+-" and not any(c in "123456789" for c in mantissa):
+        text = text.replace("-", " " if text.startswith(" ") else "", 1).replace("+", "", 1)
+    return text
 
 
 def _umask() -> int:

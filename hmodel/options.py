@@ -21,9 +21,9 @@ import tempfile
 import threading
 from contextlib import contextmanager
 
-__all__ = ["OptionError", "Parser", "real", "integer", "reals", "check_out_dir", "check_out_file",
+__all__ = ["OptionError", "Parser", "real", "integer", "reals", "add_quiet", "check_out_dir", "check_out_file",
            "check_memory", "param_option_error", "add_param_options", "params_from", "record_params",
-           "Stage", "run_cli", "announce_compilation"]
+           "Stage", "run_cli", "COMPILE_NOTICE", "announce_compilation", "listen_for_compilation"]
 
 
 class OptionError(ValueError):
@@ -35,14 +35,55 @@ class Parser(argparse.ArgumentParser):
     exiting (``run_cli`` prints it as ``error: ...`` and returns 2). A value that starts with a
     minus sign and a digit, a point, inf or nan (``--ratios -2,-1``, ``--dc -1e-3``, ``--ratios
     -inf``) is a value, not an option (argparse takes only plain negative numbers so), so that
-    its type can check it and say what is allowed."""
+    its type can check it and say what is allowed.
+
+    Options are exact: no prefix matching (argparse would take ``--sigma`` for ``--sigma2`` and
+    run), for this parser and its subcommands (``add_subparsers`` makes them of this class). An
+    unknown option is refused by the subcommand that got it, naming the options it resembles and
+    pointing at that subcommand's own ``--help``."""
 
     def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
 
     def error(self, message):
         raise OptionError(f"{message} (see {self.prog} --help)")
+
+    def parse_known_args(self, args=None, namespace=None):
+        """argparse's, but anything left over is an error here, in the (sub)parser that got it
+        (argparse would hand it to the top parser, whose message names the top --help)."""
+        ns, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(self._unknown(extras, ns))
+        return ns, extras
+
+    def _unknown(self, extras, ns) -> str:
+        """The message for the first of ``extras``: an unknown option (with the options of this
+        parser it resembles: those it abbreviates, else close spellings), an option of the
+        subcommand written before it, or a stray value."""
+        word = extras[0]
+        if not word.startswith("-"):
+            return f"unexpected argument {word!r} (an option is written --name value)"
+        option = word.split("=", 1)[0]
+        for sub in (a for a in self._actions if isinstance(a, argparse._SubParsersAction)):
+            chosen = sub.choices.get(getattr(ns, sub.dest, None) or "")
+            if chosen is not None and option in chosen._option_string_actions:
+                return (f"{option} is an option of the subcommand: write it after "
+                        f"'{chosen.prog.split()[-1]}'")
+        return f"no option {option}" + _resembles(option, self._option_string_actions)
+
+
+def _resembles(option, options) -> str:
+    """' (options are written in full): did you mean --sigma2?' for ``option``: the ``options``
+    it abbreviates (what argparse's prefix matching would have taken), else close spellings."""
+    import difflib
+    longs = sorted(o for o in options if o.startswith("--"))
+    like = ([o for o in longs if o.startswith(option)]
+            or difflib.get_close_matches(option, longs, n=3, cutoff=0.75))
+    if not like:
+        return ""
+    return f" (options are written in full): did you mean {' or '.join(like)}?"
 
 
 def _interval(lo, hi, lo_open, hi_open):
@@ -107,6 +148,13 @@ def reals(lo=None, hi=None, *, lo_open=True, hi_open=True, unit=""):
 
     parse.__name__ = "reals"
     return parse
+
+
+def add_quiet(ap: argparse.ArgumentParser):
+    """--quiet, the same on every command that shows progress: no progress lines on stderr
+    (results, warnings and errors are still printed)."""
+    ap.add_argument("--quiet", action="store_true",
+                    help="no progress lines on stderr (results, warnings and errors still shown)")
 
 
 def check_out_dir(path, option="--out"):
@@ -240,8 +288,9 @@ def record_params(out_dir, params, note="") -> str:
 
 
 class Stage:
-    """Where a command is, for the line printed when it is interrupted: ``at(text)`` as it goes,
-    ``wrote(name)`` for every output file completed."""
+    """Where a command is, for the line printed when it is interrupted: ``at(text)`` as it goes
+    (or ``at(callable)``, asked only when the line is printed: e.g. the last row a file holds
+    then), ``wrote(name)`` for every output file completed."""
 
     def __init__(self, out_dir=None):
         self.where = "start-up"
@@ -257,7 +306,8 @@ class Stage:
     def line(self, signame):
         done = (f"complete in {self.out_dir}: {', '.join(self.written)}" if self.written
                 else "no output written yet")
-        return f"interrupted ({signame}) during {self.where}; {done}"
+        where = self.where() if callable(self.where) else self.where
+        return f"interrupted ({signame}) during {where}; {done}"
 
 
 class Terminated(BaseException):
@@ -335,12 +385,25 @@ def run_cli(parser, argv, run, errors=(ValueError,)) -> int:
         return 143
 
 
+# the line that announces a compilation of the kernels (CLI and library alike), with its time:
+# 85-141 s for all of hmodel's on this machine, 10-25 s for fem's and dem's own
+COMPILE_NOTICE = "compiling kernels, once: one to two minutes (Numba caches them for later runs)"
+_compile_announced = False      # COMPILE_NOTICE printed in this process
+_listening = False              # listen_for_compilation registered
+_PACKAGES = ("hmodel", "fem", "dem")
+
+
+def _announce(stream=None):
+    global _compile_announced
+    print(COMPILE_NOTICE, file=sys.stderr if stream is None else stream, flush=True)
+    _compile_announced = True
+
+
 def announce_compilation(functions, stream=None):
-    """Print "compiling kernels, once: about a minute" once if some Numba function of
-    ``functions`` has no compiled code in this process and none in Numba's cache (the first run
-    after an install); returns True if it printed. The first call then compiles and caches them
-    (time the caller should keep out of its reported timings)."""
-    stream = sys.stderr if stream is None else stream
+    """Print COMPILE_NOTICE ("compiling kernels, once: one to two minutes") if some Numba
+    function of ``functions`` has no compiled code in this process and none in Numba's cache
+    (the first run after an install); returns True if it printed. The first call then compiles
+    and caches them (time the caller should keep out of its reported timings)."""
     for f in functions:
         if getattr(f, "signatures", None) or getattr(f, "targetoptions", {}).get("inline") == "always":
             continue      # compiled in this process, or inlined into its callers (never cached alone)
@@ -349,7 +412,29 @@ def announce_compilation(functions, stream=None):
         except Exception:
             cached = True     # unknown: say nothing rather than something wrong
         if not cached:
-            print("compiling kernels, once: about a minute (Numba caches them for later runs)",
-                  file=stream, flush=True)
+            _announce(stream)
             return True
     return False
+
+
+def listen_for_compilation():
+    """Print COMPILE_NOTICE on stderr the first time, in this process, that Numba compiles a
+    function of hmodel, fem or dem (not when it loads one from its cache), unless the CLI's
+    ``announce_compilation`` has said so already: a script's first library call after an
+    install is then announced as the CLI's is. Registered once, by importing hmodel or dem."""
+    from numba.core import event
+
+    class FirstCompilation(event.Listener):
+        def on_start(self, ev):
+            f = getattr(ev.data.get("dispatcher"), "py_func", None)
+            if (not _compile_announced
+                    and (getattr(f, "__module__", None) or "").split(".")[0] in _PACKAGES):
+                _announce()
+
+        def on_end(self, ev):
+            pass
+
+    global _listening
+    if not _listening:
+        event.register("numba:compile", FirstCompilation())
+        _listening = True

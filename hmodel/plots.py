@@ -15,8 +15,9 @@ import numpy as np  # noqa: E402
 from .io import save_figure  # noqa: E402
 
 __all__ = ["fig_q_eps1", "fig_epsv_eps1", "fig_probes", "fig_stress_components", "fig_polar_w2",
-           "fig_w2_split", "fig_domain", "fig_w2_normal_tangential", "polar_axes",
-           "fig_burst_paths", "fig_burst_ke", "fig_burst_residual"]
+           "fig_w2_split", "fig_domain", "fig_w2_normal_tangential", "polar_axes", "mark_cone",
+           "mark_plastic", "cone_zoom", "cone_of", "needs_zoom", "polar_series",
+           "fig_burst_paths", "fig_burst_ke", "fig_burst_residual", "END_MARK"]
 
 
 def _mark(ax, x, y, label="A", marker="o", color="C3", offset=(6, -12)):
@@ -128,42 +129,179 @@ def _shade_plastic(ax, pr):
         ax.plot([], [], color="0.85", lw=6, label="plastic zone")
 
 
+# a cone narrower than this [deg] gets a second panel, W2 against alpha_sigma around it
+ZOOM_BELOW_DEG = 30.0
+CONE_COLOR = "C3"
+
+
 def polar_axes(ax, rmax=1.6):
-    """The paper's polar frame: circle r = 0.5 (W2 = 0), d sigma2 horizontal, d sigma1 vertical."""
+    """The paper's polar diagram on a matplotlib polar axes ``ax``: the angle is alpha_sigma
+    [deg] from the d sigma2 axis, counter-clockwise (ticks every 30 deg), the radius 0.5 + W2
+    (radial ticks labelled with W2), the dashed circle W2 = 0, for 0.5 + W2 up to ``rmax``."""
+    ax.set_thetagrids(np.arange(0, 360, 30), [f"{a}°" for a in range(0, 360, 30)], fontsize=8)
+    ax.set_ylim(0, rmax)
+    ticks = [r for r in (0.0, 0.5, 1.0, 1.5, 2.0, 2.5) if r <= rmax]
+    ax.set_yticks(ticks)
+    ax.set_yticklabels([f"{r - 0.5:g}" for r in ticks], fontsize=7, color="0.35")
+    ax.set_rlabel_position(112.5)             # W2 read along the 112.5 deg ray, off the data
+    ax.grid(alpha=0.35)
     t = np.linspace(0, 2 * np.pi, 361)
-    ax.plot(0.5 * np.cos(t), 0.5 * np.sin(t), "k--", lw=0.8, label="W2 = 0")
-    ax.axhline(0, color="k", lw=0.4)
-    ax.axvline(0, color="k", lw=0.4)
-    ax.set_aspect("equal")
-    ax.set_xlim(-rmax, rmax)
-    ax.set_ylim(-rmax, rmax)
-    ax.set_xlabel(r"$\delta\sigma_2$ direction: $(0.5 + W_2)\cos\alpha_\sigma$")
-    ax.set_ylabel(r"$\delta\sigma_1$ direction: $(0.5 + W_2)\sin\alpha_\sigma$")
+    ax.plot(t, np.full_like(t, 0.5), "k--", lw=0.9, label=r"$W_2 = 0$ (radius 0.5)")
 
 
-def _polar_xy(alpha_deg, w):
-    o = np.argsort(alpha_deg)
-    a = np.radians(np.asarray(alpha_deg)[o])
-    r = 0.5 + np.asarray(w)[o]
-    return r * np.cos(a), r * np.sin(a)
+def _arc_text(cone) -> str:
+    """'243.4°-249.2°' (one arc, or several joined by ', '; angles above 360 wrapped)."""
+    return ", ".join(f"{a % 360:.1f}°-{b % 360:.1f}°" if b > a else f"{a % 360:.1f}°"
+                     for a, b in cone)
 
 
-def fig_polar_w2(series, path, title="Normalized second-order work", no_solution=None):
-    """Fig. 8 / 15 / 16: polar diagram, point at angle alpha_sigma and radius 0.5 + W2.
-    ``series``: list of (label, alpha_sigma [deg], w2, style). ``no_solution``: stress
-    directions alpha_sigma [deg] whose stress probe has no static solution (no strain increment
-    gives them: ``probes.stress_probes``), marked on the circle W2 = 0."""
-    fig, ax = plt.subplots(figsize=(6, 6))
-    polar_axes(ax, rmax=max(1.6, 0.6 + max(np.nanmax(s[2]) for s in series)))
+def mark_cone(ax, cone, rmax, label=r"$W_2 \leq 0$", color=CONE_COLOR):
+    """Shade the arcs ``cone`` ([[start, end], ...] of alpha_sigma [deg], ``probes.arcs``) as
+    wedges from the centre to ``rmax`` on the polar axes ``ax``, edges drawn, and write their
+    angles beside them. A single direction (start = end) is a ray."""
+    for a, b in cone:
+        th = np.radians(np.linspace(a, b, max(2, int(4 * (b - a)) + 2)))
+        ax.fill_between(th, 0.0, rmax, color=color, alpha=0.3, lw=0, zorder=0)
+        for edge in {a, b}:
+            ax.plot([np.radians(edge)] * 2, [0.0, rmax], color=color, lw=1.0, zorder=1)
+    if cone:
+        # the text outside the circle, 25 deg clockwise of the first arc (off its tick label)
+        mid = 0.5 * (cone[0][0] + cone[0][1])
+        at = np.radians(mid - 25.0)
+        ax.annotate(f"{label}\n{_arc_text(cone)}", (np.radians(mid), 0.8 * rmax),
+                    xytext=(at, 1.25 * rmax), textcoords="data", va="center", fontsize=9,
+                    ha="left" if np.cos(at) > 0.3 else "right" if np.cos(at) < -0.3 else "center",
+                    color=color, fontweight="bold", annotation_clip=False,
+                    arrowprops=dict(arrowstyle="->", color=color, lw=1.0))
+        ax.plot([], [], "s", color=color, alpha=0.4, ms=9, label=f"{label}: {_arc_text(cone)}")
+
+
+def mark_plastic(ax, plastic, rmax, color="0.55"):
+    """The plastic zone (arcs of alpha_sigma [deg]) as a grey band at the rim of the polar axes."""
+    for a, b in plastic:
+        th = np.radians(np.linspace(a, b, max(2, int(b - a) + 2)))
+        ax.fill_between(th, 0.93 * rmax, rmax, color=color, alpha=0.55, lw=0, zorder=0)
+    if plastic:
+        ax.plot([], [], "s", color=color, alpha=0.7, ms=9,
+                label=f"plastic zone (rim): {_arc_text(plastic)}")
+
+
+def cone_zoom(ax, series, cone, plastic=(), pad_deg=None, label=r"$W_2 \leq 0$",
+              color=CONE_COLOR):
+    """W2 against alpha_sigma around the cone (Cartesian ``ax``): the ``series`` ((label,
+    alpha_sigma [deg], w2, style), as ``fig_polar_w2``) within the cone's arcs widened by
+    ``pad_deg`` (default: the cone's width, at least 6 deg) on each side, the cone shaded with
+    its angles on the axis (``label`` says what it is), the plastic zone grey, W2 = 0, the least
+    W2 marked."""
+    lo, hi = min(a for a, _ in cone), max(b for _, b in cone)
+    pad = max(6.0, hi - lo) if pad_deg is None else pad_deg
+    x0, x1 = lo - pad, hi + pad
+    w_in = []
+    for name, a, w, style in series:
+        a = np.asarray(a, float)
+        w = np.asarray(w, float)
+        for shift in (0.0, 360.0, -360.0):         # a cone through 0 deg: both sides
+            sel = (a + shift >= x0) & (a + shift <= x1)
+            if sel.any():
+                o = np.argsort(a[sel] + shift)
+                ax.plot((a[sel] + shift)[o], w[sel][o], style, lw=1.3, ms=5,
+                        label=name if shift == 0.0 else None)
+                w_in.append(w[sel])
+    for k, (a, b) in enumerate(plastic):
+        ax.axvspan(a, b, color="0.55", alpha=0.15, lw=0, zorder=0,
+                   label="plastic zone" if k == 0 else None)
+    for k, (a, b) in enumerate(cone):
+        ax.axvspan(a, b, color=color, alpha=0.3, lw=0, zorder=0, label=label if k == 0 else None)
+        for edge in {a, b}:
+            ax.axvline(edge, color=color, lw=0.9)
+    ax.axhline(0.0, color="k", lw=0.8)
+    w_all = np.concatenate(w_in) if w_in else np.zeros(1)
+    w_all = w_all[np.isfinite(w_all)]
+    if w_all.size:
+        top = min(float(np.max(w_all)), 1.0)
+        bottom = min(float(np.min(w_all)), 0.0)
+        span = max(top - bottom, 0.05)
+        ax.set_ylim(bottom - 0.15 * span, top + 0.1 * span)
+    a0, w0 = series[0][1], np.asarray(series[0][2], float)
+    k = int(np.nanargmin(w0))
+    if w0[k] <= 0:
+        ax.plot([a0[k]], [w0[k]], "v", color="k", ms=7, zorder=5)
+        ax.annotate(f"least $W_2$ = {w0[k]:.3f}\nat {a0[k]:.1f}°", (a0[k], w0[k]),
+                    textcoords="offset points", xytext=(10, -4), fontsize=8, va="top")
+    ticks = sorted({round(t, 1) for t in np.arange(np.ceil(x0 / 5) * 5, x1 + 1e-9, 5.0)}
+                   - {round(e, 0) for c in cone for e in c})
+    edges = sorted({e for c in cone for e in c})
+    ax.set_xticks(ticks + edges)
+    ax.set_xticklabels([f"{t % 360:g}" for t in ticks] + [f"{e % 360:.1f}" for e in edges],
+                       fontsize=8)
+    for lab in ax.get_xticklabels()[len(ticks):]:
+        lab.set_color(color)
+        lab.set_fontweight("bold")
+        lab.set_rotation(90)
+    ax.set_xlim(x0, x1)
+    ax.set_xlabel(r"$\alpha_\sigma$ [deg]")
+    ax.set_ylabel(r"normalized second-order work $W_2$ [-]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7.5, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
+    ax.set_title(f"zoom on the cone, {label}: {_arc_text(cone)}", fontsize=10, color=color)
+
+
+def cone_of(alpha_deg, w2):
+    """The arcs of alpha_sigma [deg] where ``w2`` <= 0 (``probes.arcs``; NaN counts as > 0)."""
+    from .probes import arcs
+    w = np.asarray(w2, float)
+    return arcs(np.asarray(alpha_deg, float), np.isfinite(w) & (w <= 0))
+
+
+def needs_zoom(cone) -> bool:
+    return bool(cone) and sum(b - a for a, b in cone) < ZOOM_BELOW_DEG
+
+
+def polar_series(ax, series, rmax):
+    """Each (label, alpha_sigma [deg], w2, style) at angle alpha_sigma and radius 0.5 + w2,
+    clipped to [0, rmax] (a clipped point is drawn on the rim or the centre)."""
     for label, a, w, style in series:
-        x, y = _polar_xy(a, w)
-        ax.plot(x, y, style, label=label, lw=1.2, ms=3)
+        a = np.asarray(a, float)
+        o = np.argsort(a)
+        r = np.clip(0.5 + np.asarray(w, float)[o], 0.0, rmax)
+        ax.plot(np.radians(a[o]), r, style, label=label, lw=1.2, ms=5)
+
+
+def fig_polar_w2(series, path, title="Normalized second-order work", cone=None, plastic=None,
+                 no_solution=None):
+    """Fig. 8 / 15 / 16: the polar diagram, each point at angle alpha_sigma and radius 0.5 + W2
+    (the dashed circle is W2 = 0), with the cone W2 <= 0 shaded and its angles written, the
+    plastic zone at the rim, and where the cone is narrow (< ZOOM_BELOW_DEG) a second panel of
+    W2 against alpha_sigma around it. ``series``: list of (label, alpha_sigma [deg], w2,
+    style); ``cone``, ``plastic``: arcs [[start, end], ...] of alpha_sigma [deg] (default for
+    the cone: where the first series has w2 <= 0; for the plastic zone: none drawn);
+    ``no_solution``: stress directions alpha_sigma [deg] whose stress probe has no static
+    solution (no strain increment gives them: ``probes.stress_probes``), marked x on the circle
+    W2 = 0."""
+    cone = cone_of(series[0][1], series[0][2]) if cone is None else cone
+    plastic = plastic or []
+    zoom = needs_zoom(cone)
+    fig = plt.figure(figsize=(12.5 if zoom else 7, 6.6))
+    gs = fig.add_gridspec(1, 2 if zoom else 1, width_ratios=[1.15, 1] if zoom else [1])
+    ax = fig.add_subplot(gs[0, 0], projection="polar")
+    rmax = max(1.6, 0.6 + max(float(np.nanmax(s[2])) for s in series))
+    polar_axes(ax, rmax)
+    mark_plastic(ax, plastic, rmax)
+    mark_cone(ax, cone, rmax)
+    polar_series(ax, series, rmax)
     if no_solution is not None and len(no_solution):
         t = np.radians(np.asarray(no_solution, float))
-        ax.plot(0.5 * np.cos(t), 0.5 * np.sin(t), "x", color="C1", ms=7, mew=1.5,
+        ax.plot(t, np.full(len(t), 0.5), "x", color="C1", ms=7, mew=1.5,
                 label=f"stress probe without a static solution ({len(t)})")
-    ax.legend(fontsize=8, loc="upper left")
-    ax.set_title(title)
+    if not cone:
+        ax.plot([], [], " ", label=r"$W_2 > 0$ in every direction probed")
+    ax.set_title("angle: $\\alpha_\\sigma$ (tan = d$\\sigma_1$/d$\\sigma_2$), radius: 0.5 + $W_2$",
+                 fontsize=8, pad=26)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, frameon=False)
+    if zoom:
+        cone_zoom(fig.add_subplot(gs[0, 1]), series, cone, plastic)
+    fig.suptitle(title)
+    fig.tight_layout()
     save_figure(fig, path)
 
 
@@ -311,33 +449,52 @@ def fig_burst_paths(drained, paths, rows, path, eta_w2=None, title=None):
     save_figure(fig, path)
 
 
+# the end of a run after the switch, by its outcome (black: apart from the colours of the ratios)
+END_MARK = {"failure": ("x", "k", "end: failure"), "equilibrium": ("o", "none", "end: equilibrium"),
+             "undecided": ("s", "none", "end: undecided (at the cap)")}
+
+
 def fig_burst_ke(histories, path, title="Kinetic energy after the switch", unit="J/m",
                  time_unit=("ms", 1e3)):
     """E_c against the time since the switch, log axis, one panel per start state, every ratio
-    and switch (colour the ratio, solid ``past``, dashed ``below``; the end marked by the outcome).
+    and switch (colour the ratio, solid ``past``, dashed ``below``), the end of each run marked
+    by its outcome (black cross failure, hollow circle equilibrium, hollow square undecided);
+    one legend below the panels, off the data.
     ``histories``: list of dicts with ratio, start_fraction, switch, outcome, t [s], ke [J or J/m]."""
+    from matplotlib.lines import Line2D
     fr = sorted({h["start_fraction"] for h in histories})
     ratios = sorted({h["ratio"] for h in histories}, reverse=True)
     col = {R: f"C{i % 10}" for i, R in enumerate(ratios)}
-    fig, axes = plt.subplots(1, len(fr), figsize=(5.6 * len(fr), 4.4), squeeze=False,
-                             constrained_layout=True)
+    fig, axes = plt.subplots(1, len(fr), figsize=(5.6 * len(fr), 5.2), squeeze=False)
+    ends = set()
     for ax, f in zip(axes[0], fr):
         for h in (h for h in histories if h["start_fraction"] == f):
             t = time_unit[1] * np.asarray(h["t"])
             ke = np.asarray(h["ke"], float)
             ok = ke > 0
             ax.plot(t[ok], ke[ok], "-" if h["switch"] == "past" else "--", color=col[h["ratio"]],
-                    lw=1.1, label=f"R = {h['ratio']:g}, {h['switch']}: {h['outcome']}")
+                    lw=1.1)
             if ok.any():
-                ax.plot(t[ok][-1], ke[ok][-1], "x" if h["outcome"] == "failure" else "o",
-                        color=_OUTCOME_COLOR.get(h["outcome"], "k"), ms=7)
+                m, fc, _ = END_MARK.get(h["outcome"], ("s", "none", ""))
+                ax.plot(t[ok][-1], ke[ok][-1], m, mec="k", mfc=fc, color="k", ms=8, mew=1.4,
+                        zorder=5)
+                ends.add(h["outcome"])
         ax.set_yscale("log")
         ax.set_xlabel(f"time since the switch [{time_unit[0]}]")
         ax.set_ylabel(f"kinetic energy $E_c$ [{unit}]")
         ax.set_title(f"start at {f:g} of the drained peak $\\eta$")
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7)
-    fig.suptitle(title)
+    handles = [Line2D([], [], color=col[R], lw=2, label=f"R = {R:g}") for R in ratios]
+    handles += [Line2D([], [], color="k", ls="-", label="past the c peak (burst expected)"),
+                Line2D([], [], color="k", ls="--", label="below the c peak (equilibrium expected)")]
+    handles += [Line2D([], [], ls="none", marker=END_MARK[o][0], mec="k", mfc=END_MARK[o][1],
+                       color="k", ms=8, mew=1.4, label=END_MARK[o][2])
+                for o in END_MARK if o in ends]
+    rows = -(-len(handles) // 5)
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 5), fontsize=8,
+               frameon=False)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout(rect=(0, 0.03 + 0.04 * rows, 1, 1))
     save_figure(fig, path)
 
 

@@ -200,7 +200,8 @@ def test_setup_block_is_what_ci_runs():
     setup = [line for line in lines if line.startswith(("python3 -m venv", "pip install"))]
     assert setup[0] == "python3 -m venv .venv && . .venv/bin/activate"
     install_main, install_test = setup[1], setup[2]
-    assert install_main.startswith("pip install . && python -m fem biaxial")
+    # editable: `python -m ...` from the root and a script elsewhere import the same files
+    assert install_main.startswith("pip install -e . && python -m fem biaxial")
     assert install_test == 'pip install -e ".[test,distributed]" && python -m pytest'
     ci = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()]
     assert install_test in ci, ".ci/run does not run the README's test command"

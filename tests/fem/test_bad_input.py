@@ -108,6 +108,8 @@ def test_sigterm_is_one_line_and_exit_143(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("interrupted (SIGTERM) during load step"), lines
     c = read_curve(out / "curve.csv")                     # whole rows only, readable
     assert len(c["step"]) >= 3 and np.array_equal(c["step"], np.arange(len(c["step"])))
+    k = int(c["step"][-1])                                # the line names the file's last row
+    assert f"during load step {k + 1}, after step {k} (eps1 = " in lines[0], lines
     with meshio.xdmf.TimeSeriesReader(out / "fields.xdmf") as r:
         r.read_points_cells()
         assert r.num_steps >= 3

@@ -203,3 +203,18 @@ def test_bit_identical_for_any_thread_count(tmp_path):
         outs.append(out)
     for f in ("history.csv", "paths.csv"):
         assert (outs[0] / f).read_bytes() == (outs[1] / f).read_bytes(), f
+
+
+def test_progress_and_table_lines(tmp_path, capsys):
+    """What `fem burst` prints (issue 26): the held force step dG = B dc in the header, W2_ext
+    named as dG dU1 (it equals dU1 when dG = 1 N/m), a path that needs no Newton iteration
+    said so instead of '0 Newton iterations', no '-0.000' and no 'nan'."""
+    assert fcli.main(["burst", *SMALL, "--out", str(tmp_path / "run")]) == 0
+    cap = capsys.readouterr()
+    err, out = cap.err, cap.out
+    assert "(held force step dG = B dc = 1 N/m)" in err          # B = 0.05 m, dc = 20 Pa
+    assert "W2_ext = dG dU1 = " in err
+    assert " 0 Newton iterations" not in err
+    assert ("every step converged at its predictor" in err) or (" Newton iterations" in err)
+    for text in (err, out):
+        assert "-0.000" not in text and "nan" not in text.lower(), text

@@ -173,3 +173,35 @@ def test_interrupted_run_lists_every_converged_step(tmp_path, monkeypatch, rows)
     assert len(c["step"]) == rows + 1 and len(st) == rows + 1
     assert np.array_equal(c["step"], np.arange(rows + 1))
     assert np.array_equal([t for t, _, _ in st], c["eps1"])
+
+
+def test_criteria_table_is_aligned(homogeneous_run):
+    """Every number of the criteria table starts in the same column, whatever the label's
+    length (the force-controlled det K row was one column off)."""
+    from fem.biaxial import format_summary
+    lines = format_summary(homogeneous_run.summary).splitlines()
+    header, rows = lines[0], [line for line in lines[1:] if "not reached" not in line]
+    col = header.index("eps1 [%]") + len("eps1 [%]")           # the eps1 column's right edge
+    assert len(rows) >= 5
+    for line in rows:
+        eps1 = line[:col].split()[-1]
+        float(eps1)
+        assert line[col] == " " and line[col - len(eps1) - 1] == " ", line
+
+
+def test_mode_figure_says_perfect_and_scales_the_arrows(homogeneous_run, monkeypatch, tmp_path):
+    """mode_ks.png of a perfect specimen says so (no 'red: imperfection'), and its arrows
+    have a colour scale."""
+    import matplotlib.pyplot as plt
+    from fem.output import plot_mode
+    figs = []
+    monkeypatch.setattr(plt, "close", lambda fig=None: figs.append(fig))
+    prob = homogeneous_run.problem
+    u = np.random.default_rng(0).standard_normal(prob.ndofs)
+    plot_mode(tmp_path / "m.png", prob, u, title="t")
+    fig = figs[-1]
+    titles = [ax.get_title() for ax in fig.axes]
+    assert any("perfect specimen" in t for t in titles)
+    assert not any("imperfection" in t for t in titles)
+    bars = [ax.get_ylabel() for ax in fig.axes]
+    assert any("|u| / max" in b for b in bars) and any("|eps| / max" in b for b in bars)

@@ -156,7 +156,7 @@ def test_compilation_announced_once_when_not_cached():
     s = io.StringIO()
     assert not announce_compilation([fake({"sig": 1})], s) and s.getvalue() == ""
     assert announce_compilation([fake({"sig": 1}), fake({}), fake({})], s)
-    assert s.getvalue().count("compiling kernels, once: about a minute") == 1
+    assert s.getvalue().count("compiling kernels, once: one to two minutes") == 1
 
 
 def test_fig4_marks_the_peak_and_fig9_legend_is_off_the_curves(monkeypatch, tmp_path, sweep_A):

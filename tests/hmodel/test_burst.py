@@ -304,3 +304,20 @@ def test_burst_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, argv, 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and word in err[0]
     assert not out.exists()
+
+
+def test_burst_cli_lines_say_none_and_never(tmp_path, capsys):
+    """The table and the cone lines of `hmodel burst` (issue 26): a path whose c does not peak
+    has 'none' where its eta_peak_c would be, a direction that never enters the cone W2 <= 0
+    says so; no 'nan' anywhere."""
+    out = tmp_path / "b"
+    assert main(["burst", "--ratios", "-1,-2", "--start-fractions", "0.9", "--path-strain", "0.01",
+                 "--quiet", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "nan" not in text.lower(), text
+    row = [line for line in text.splitlines() if line.split()[:2] == ["-1", "0.9"]]
+    assert len(row) == 1 and row[0].split()[3] == "none", row
+    assert ("R = -1: strain direction alpha_eps = 315.00 deg never enters the cone W2 <= 0 of "
+            "the drained path before its peak") in text
+    assert "R = -2: strain direction alpha_eps = 296.57 deg enters the cone W2 <= 0 of the " \
+           "drained path at eta = 0.99" in text

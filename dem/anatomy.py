@@ -404,7 +404,8 @@ def plot_anatomy(path, panels, dpi=150):
     positive own second-order work since 0 thin and grey, the negative ones thick and red, the
     largest cluster of those in dark blue, and the velocity fluctuation of the backbone disks as
     arrows (cell means, ``coarse_fluctuation``), scaled per panel (the 90th percentile 0.9 cell
-    long; the key gives the scale).  The panel's title carries its ``anatomy`` figures.
+    long; the key gives the scale; an arrow longer than 2.5 cells is drawn 2.5 cells long, in
+    orange).  The panel's title carries its ``anatomy`` figures.
     ``panels``: [(title, Simulation now, ContactState at 0)], one or more (ValueError if none)."""
     import matplotlib
     matplotlib.use("Agg")
@@ -444,9 +445,15 @@ def plot_anatomy(path, panels, dpi=150):
         if ref > 0:
             # the 90th percentile of the cell means is drawn 0.9 cell long
             cell = (wl[1] - wl[0]) / cx.shape[1]
+            # a few cells far above the rest (a local slip) would cross the panel: drawn 2.5
+            # cells long, in orange
+            mag = np.hypot(mv[:, :, 0], mv[:, :, 1])
+            cap = 2.5 / 0.9 * ref
+            clip = mag > cap
+            mv = mv * np.where(clip, cap / np.where(clip, mag, 1.0), 1.0)[:, :, None]
             q = ax.quiver(cx, cy, mv[:, :, 0], mv[:, :, 1], angles="xy", scale_units="xy",
-                          scale=ref / (0.9 * cell), width=0.003, color="k",
-                          zorder=4)
+                          scale=ref / (0.9 * cell), width=0.003, zorder=4,
+                          color=np.where(clip, "C1", "k").ravel().tolist())
             key = float(f"{ref:.1g}")
             ax.quiverkey(q, 0.45, -0.025, key, f"{key:g} m/s",
                          labelpos="E", coordinates="axes", fontproperties={"size": 7})
@@ -463,5 +470,6 @@ def plot_anatomy(path, panels, dpi=150):
     ax.plot([], [], "-", color="C3", lw=1.1, label="own W2 < 0")
     ax.plot([], [], "-", color="navy", lw=2.0, label="largest cluster of W2 < 0")
     ax.plot([], [], "k>", ms=5, label="velocity less the walls' affine field (backbone, cell means)")
+    ax.plot([], [], ">", color="C1", ms=5, label="... shortened to 2.5 cells")
     fig.legend(loc="outside lower center", ncol=4, fontsize=7, frameon=False)
     save_figure(fig, path, dpi=dpi)

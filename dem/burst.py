@@ -347,7 +347,11 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
     c_rest) / ``opts.stairs``; a step that settles moves the staircase up (its end state, at
     rest, is the next start); one that fails is halved, down to ``opts.dc``; the search ends with
     a failing hold of +dc from an equilibrium at c: the c peak at rest is that c, the ``past``
-    run that failing hold. ``below``: from the first equilibrium of the staircase whose c reaches
+    run that failing hold. (Each step raises the held force G, the force conjugate to U1, by
+    W t times the step from the last equilibrium's, so G rises along the staircase; c = s1 + R
+    s2 follows G through the box's shape, c W t = G + R F2 (W/H - W0/H0), and a hold that creeps
+    may end at a c below its start: the c peak at rest is the c of the equilibrium under the
+    largest G.) ``below``: from the first equilibrium of the staircase whose c reaches
     c_rest + below_rise (c_peak_rest - c_rest), held at its c + dc. The loaded peak's state is
     relaxed too: its c at rest and its drop from the loaded c are recorded. A path without a
     loaded peak gets one below run from its end, relaxed. ``journal``: a ``_Journal`` that

@@ -24,8 +24,9 @@ def test_bench_prints_rounded_figures(monkeypatch, capsys):
     from dem.__main__ import main
     monkeypatch.setattr(dem.bench, "bench", lambda **k: {
         "n": 100, "busy_core": False, "particle_steps_per_s_auto": 12345678.91234,
-        "ratio_auto_to_1_thread": 0.987654321})
+        "ratio_auto_to_1_thread": 0.987654321, "ledger_cost": 1.0612345})
     main(["bench", "--n", "100", "--steps", "1"])          # exit 0: returns
     out = capsys.readouterr().out
     assert "particle_steps_per_s_auto: 1.235e+07" in out and "ratio_auto_to_1_thread: 0.9877" in out
+    assert "ledger_cost: 1.061 (a step's time with the energy ledger over without it)" in out
     assert "n: 100" in out and "busy_core: False" in out

@@ -396,8 +396,8 @@ def build_parser() -> opt.Parser:
     u.add_argument("--peak-strain", type=opt.real(0, 0.5), default=5e-3,
                    help="or the path this far beyond the largest c [-]")
     u.add_argument("--below-rise", type=opt.real(0, 1), default=0.5,
-                   help="below: the first state whose c at rest reaches c_start + this "
-                        "(c_peak - c_start), at rest (0 < below-rise < 1)")
+                   help="below: from the first equilibrium of the staircase whose c reaches "
+                        "c_start + this (c_peak - c_start), all at rest (0 < below-rise < 1)")
     u.add_argument("--hold", choices=("dead_load", "servo"), default="dead_load",
                    help="how G is held after the switch: a dead load on the tied walls (one "
                         "dynamic degree of freedom, no servo) or the servo on c")
@@ -424,7 +424,8 @@ def build_parser() -> opt.Parser:
     u.add_argument("--fail-strain", type=opt.real(0, 1), default=0.01,
                    help="failure: |d eps| since the switch beyond this [-]")
     u.add_argument("--workers", type=opt.integer(1, 1024), default=None,
-                   help="local processes (the paths, then the switched runs; one thread each)")
+                   help="local processes (the paths, then each path's rest search and its runs; one "
+                        "thread each)")
     u.add_argument("--threads", type=THREADS, default=None,
                    help="threads of a run alone in the process (results do not depend on it); "
                         "default: auto")

@@ -1104,5 +1104,9 @@ def plot_burst(out_dir, combos, paths, stairs, runs, summary):
         ax.set_ylabel(ylabel)
         ax.set_title(f"DEM ({n} disks): {title}", fontsize=10)
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7)
+        if runs:
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, "no switched run (no peak at rest found)", ha="center",
+                    transform=ax.transAxes)
         save_figure(fig, os.path.join(out_dir, name), dpi=120)

@@ -113,7 +113,6 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     # only the states the switches started from are kept
     assert sorted(p.name for p in (out / "rest").iterdir()) == sorted(
         f"R-2_f0.9_{r['switch']}.npz" for r in runs)
-    return out
 
 
 def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, tmp_path,

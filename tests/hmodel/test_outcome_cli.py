@@ -97,9 +97,9 @@ def test_probes_mark_stress_directions_without_solution(tmp_path, monkeypatch):
         n[::3] = 0
         return sp._replace(n_solutions=n)
 
-    def fig(series, path, title="", no_solution=None):
+    def fig(series, path, title="", no_solution=None, **kw):
         seen["none"] = np.asarray(no_solution)
-        return probes_fig(series, path, title=title, no_solution=no_solution)
+        return probes_fig(series, path, title=title, no_solution=no_solution, **kw)
     probes_fig = cli.plots.fig_polar_w2
     monkeypatch.setattr(cli, "stress_probes", some_none)
     monkeypatch.setattr(cli.plots, "fig_polar_w2", fig)

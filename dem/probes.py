@@ -453,10 +453,19 @@ def _map(tasks, collect, workers, scheduler, fn=None):
     else:
         # spawn, not fork: numba's OpenMP threading layer must not be forked
         import multiprocessing
-        with ProcessPoolExecutor(max_workers=min(workers or os.cpu_count(), len(tasks)),
-                                 mp_context=multiprocessing.get_context("spawn")) as ex:
+        ex = ProcessPoolExecutor(max_workers=min(workers or os.cpu_count(), len(tasks)),
+                                 mp_context=multiprocessing.get_context("spawn"))
+        try:
             for tag, r in zip(tags, ex.map(fn, args)):
                 collect(tag, r)
+        except BaseException:
+            # Ctrl-C / SIGTERM (or a failed run): stop the workers now rather than wait for
+            # their runs to end (the executor's exit would); what finished is already collected
+            for proc in list((getattr(ex, "_processes", None) or {}).values()):
+                proc.terminate()
+            ex.shutdown(wait=False, cancel_futures=True)
+            raise
+        ex.shutdown()
 
 
 def _report(r, k, total, t0, verbose):

@@ -1327,7 +1327,9 @@ def _score_figure(out_dir, space, records, best, model):
                 label="best")
         ax.set_yscale("log")
         if space.log[j]:
+            from matplotlib.ticker import NullFormatter
             ax.set_xscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(space.names[j])
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("score sum (err / tol)^2 (mean of the seeds)")

@@ -39,7 +39,8 @@ def test_files_of_the_format_before_units_still_load(tmp_path):
     old = tmp_path / "old.json"
     old.write_text(json.dumps(DemParams(n=500).to_dict(), indent=1))   # the old `dem params`
     assert load_params(old) == DemParams(n=500)
-    gallery = Path(__file__).parents[2] / "docs" / "gallery" / "calibration" / "calibrated.json"
+    gallery = (Path(__file__).parents[2] / "docs" / "gallery" / "calibration" / "before_issue27"
+               / "calibrated.json")
     assert load_params(gallery) == DemParams(n=2000, kn_over_d=8.723e9, friction_deg=15.0,
                                              rolling_friction=0.2)   # written before units
 

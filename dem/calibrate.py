@@ -526,8 +526,8 @@ def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max
 
     ``target``: the target figures (dict of TOLERANCES' keys).  ``evaluate(list of value
     tuples, stage) -> list of records`` (dicts with at least met, score, index and the figures
-    of TOLERANCES), called once per batch with the sets not evaluated yet.  Returns (best record, {values: record}, trace, why it stopped,
-    the model's last analysis or None)."""
+    of TOLERANCES), called once per batch with the sets not evaluated yet.  Returns (best
+    record, {values: record}, trace, why it stopped, the model's last analysis or None)."""
     if initial < space_dim_min(space):
         raise ValueError(f"initial={initial!r}; allowed an integer >= {space_dim_min(space)}")
     seen = {}
@@ -570,8 +570,8 @@ def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max
                                  for _, r in pts])
             info = analyse(model, dense)
             info["round"] = k
-            trace[-1]["model"] = {key: info[key] for key in ("predicted_score", "reachable",
-                                                             "least_miss", "conflicts", "loo")}
+            trace[-1]["model"] = {key: info[key] for key in (
+                "predicted_score", "predicted_met", "reachable", "least_miss", "conflicts", "loo")}
             info["covering_radius"] = covering_radius(dense, [u for u, _ in pts])
             if not info["reachable"]:
                 why = "no set within the bounds meets the targets"

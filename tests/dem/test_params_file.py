@@ -124,6 +124,7 @@ def test_crosscheck_takes_an_hmodel_file(tmp_path, capsys):
     assert h["params"] == HParams(n_dir=36, phi_g=25.0, p0=200e3)
     f = tmp_path / "dem.json"
     save_params(f, DemParams())
+    capsys.readouterr()      # what hmodel_part printed (a compile notice, if a kernel compiled)
     code, err = _run(["crosscheck", "--hmodel-params", str(f), "--out", str(tmp_path / "o")], capsys)
     assert code == 2 and len(err) == 1 and "--hmodel-params" in err[0], err
     assert 'model = "dem": allowed "hmodel"' in err[0]

@@ -389,8 +389,7 @@ class FigureModel:
 
     def distance(self, U):
         """Distance (in u) of each row of U to the nearest set the model was fitted on."""
-        U = np.atleast_2d(np.asarray(U, float))
-        return np.min(np.linalg.norm(U[:, None, :] - self.U[None], axis=2), axis=1)
+        return nearest_distance(U, self.U)
 
     def __call__(self, U):
         """Predicted y (m, 3) at u (m, d)."""
@@ -572,7 +571,6 @@ def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max
             info["round"] = k
             trace[-1]["model"] = {key: info[key] for key in (
                 "predicted_score", "predicted_met", "reachable", "least_miss", "conflicts", "loo")}
-            info["covering_radius"] = covering_radius(dense, [u for u, _ in pts])
             if not info["reachable"]:
                 why = "no set within the bounds meets the targets"
                 break
@@ -607,19 +605,18 @@ def space_dim_min(space):
     return len(space.names) + 2
 
 
-def covering_radius(dense, U):
-    """The largest distance (in u) from a point of ``dense`` to the nearest of U: the radius of
-    the largest ball of the box with no evaluated set in it (to the dense set's resolution)."""
-    U = np.asarray(U, float)
-    d = np.min(np.linalg.norm(dense[:, None, :] - U[None], axis=2), axis=1)
-    return float(d.max())
+def nearest_distance(P, ref):
+    """Distance (in u) of each row of P to the nearest row of ref (rows of nan, sets outside
+    the box, are ignored)."""
+    P = np.atleast_2d(np.asarray(P, float))
+    return np.nanmin(np.linalg.norm(P[:, None, :] - np.asarray(ref, float)[None], axis=2), axis=1)
 
 
 def _explore(model, dense, ref):
     """Among the dense points at least MIN_DISTANCE from every row of ref, those of least miss
     within the model's error bar, and of them the one of least predicted miss (the model's
     best guess of where the targets may be met)."""
-    far = np.nanmin(np.linalg.norm(dense[:, None, :] - ref[None], axis=2), axis=1) >= MIN_DISTANCE
+    far = nearest_distance(dense, ref) >= MIN_DISTANCE
     if not far.any():
         return None
     P = dense[far]
@@ -631,8 +628,7 @@ def _explore(model, dense, ref):
 def _candidate(model, dense, ref):
     """The point of least predicted score at least MIN_DISTANCE from every row of ref: the
     polished minimum when it keeps the distance, else the best dense point that does."""
-    ok = lambda U: np.nanmin(np.linalg.norm(np.atleast_2d(U)[:, None, :] - ref[None], axis=2),
-                             axis=1) >= MIN_DISTANCE
+    ok = lambda U: nearest_distance(U, ref) >= MIN_DISTANCE
     u, _ = _minimise(model.score, dense)
     if ok(u)[0]:
         return u
@@ -1298,6 +1294,12 @@ def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space):
     _save(fig, out_dir, "calibration.png")
 
 
+def _axis_label(name):
+    from .params import UNITS
+    u = UNITS.get(name, "-")
+    return f"{name} [{u}]"
+
+
 def _score_figure(out_dir, space, records, best, model):
     """calibration_score.png: the score of every set against each varied parameter (filled:
     all targets met), and the model's least predicted score over the other parameters."""
@@ -1330,7 +1332,7 @@ def _score_figure(out_dir, space, records, best, model):
             from matplotlib.ticker import NullFormatter
             ax.set_xscale("log")
             ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_xlabel(space.names[j])
+        ax.set_xlabel(_axis_label(space.names[j]))
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("score sum (err / tol)^2 (mean of the seeds)")
     axes[0][0].legend(fontsize=7)
@@ -1359,11 +1361,11 @@ def _search_figure(out_dir, space, records, best):
         for r in records:
             ax.annotate(str(r["index"]), (r["values"][0], r["values"][1]), fontsize=6,
                         textcoords="offset points", xytext=(3, 3))
-        ax.set_ylabel(space.names[1])
+        ax.set_ylabel(_axis_label(space.names[1]))
         if space.log[1]:
             ax.set_yscale("log")
             ax.yaxis.set_minor_formatter(NullFormatter())
-    ax.set_xlabel(space.names[0])
+    ax.set_xlabel(_axis_label(space.names[0]))
     if space.log[0]:
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())

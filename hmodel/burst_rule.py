@@ -29,6 +29,18 @@ lowest periods of the specimen; ``rule`` a ``BurstRule``):
   largest excursion since the switch (the displacement converges). A run held at exactly its
   equilibrium (dG = 0 from rest: E_c = 0 throughout) is an equilibrium.
 * **undecided**: neither by ``max_time`` (the cap); reported, never counted as either.
+
+**The energy release** (``energy_release``; the one growth measure of the three parts, the DEM
+included): the kinetic energy gained since the switch against the work the held step has put
+in, r(t) = (E_c(t) - E_c(0)) / W2_ext(t). By Eq. 1, E_c(t) - E_c(0) = W2_ext - W2_int - D with
+D >= 0, so r(t) > 1 proves W2_int < 0 (the specimen gave energy back) and r(t) >= ``RELEASE``
+proves -W2_int >= (``RELEASE`` - 1) W2_ext. Neither the kinetic energy at the switch (the
+floor: it is subtracted) nor the time step (both are energies of the motion, not of a step)
+enters it, and, unlike a growth over E_c one step after the switch, it does not depend on how
+small that first E_c is. From rest r -> 1 as t -> 0 (all the work is kinetic at first); a
+stable specimen then stays below 1 (W2_int >= 0), a bursting one passes ``RELEASE`` at a time
+t_release that converges with the time step and does not depend on where the run is stopped
+after it.
 """
 from __future__ import annotations
 
@@ -37,9 +49,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["BurstRule", "decide", "OUTCOMES", "ke_growth"]
+__all__ = ["BurstRule", "decide", "OUTCOMES", "ke_growth", "RELEASE", "energy_release"]
 
 OUTCOMES = ("equilibrium", "failure", "undecided")
+# the energy release that tells a burst: E_c - E_c(0) >= RELEASE x W2_ext, i.e. the specimen gave
+# back at least as much as the held step put in (-W2_int >= W2_ext; ``energy_release``)
+RELEASE = 2.0
 
 
 class BurstRule(NamedTuple):
@@ -93,6 +108,30 @@ def ke_growth(ke) -> float:
     if ke[1] > 0:
         return top / float(ke[1])
     return math.inf if top > 0 else math.nan
+
+
+def energy_release(t, ke, w2_ext, multiple: float = RELEASE) -> dict:
+    """The energy release of a held run (module doc): ``ratio_max``, the largest
+    r = (E_c - E_c(0)) / W2_ext over the rows with W2_ext > 0 (nan without any), ``t_release``
+    [s], the first time r >= ``multiple`` (nan if never), ``released`` (whether it came).
+
+    t : (n,) time since the switch [s]; ke : (n,) kinetic energy [J] (t[0]: the switch);
+    w2_ext : (n,) dG (U1 - U1(0)) [J]; multiple : > 1.
+    """
+    if not (math.isfinite(multiple) and multiple > 1):
+        raise ValueError(f"multiple = {multiple!r} is out of range: allowed multiple > 1")
+    t = np.asarray(t, float)
+    ke = np.asarray(ke, float)
+    w2 = np.asarray(w2_ext, float)
+    if not (t.shape == ke.shape == w2.shape and t.ndim == 1 and t.size >= 1):
+        raise ValueError("t, ke, w2_ext: allowed one-dimensional arrays of one length >= 1")
+    ok = w2 > 0
+    r = np.full(t.shape, math.nan)
+    r[ok] = (ke[ok] - ke[0]) / w2[ok]
+    hit = np.flatnonzero(ok & (r >= multiple))
+    return {"ratio_max": float(np.max(r[ok])) if ok.any() else math.nan,
+            "t_release": float(t[hit[0]]) if hit.size else math.nan,
+            "released": bool(hit.size)}
 
 
 def decide(t, ke, w2_ext, eps1, window: float, rule: BurstRule = BurstRule()) -> str | None:

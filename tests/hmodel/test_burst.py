@@ -321,3 +321,29 @@ def test_burst_cli_lines_say_none_and_never(tmp_path, capsys):
             "the drained path before its peak") in text
     assert "R = -2: strain direction alpha_eps = 296.57 deg enters the cone W2 <= 0 of the " \
            "drained path at eta = 0.99" in text
+
+
+def test_energy_release_of_a_spring_from_rest():
+    """A step load dG on an undamped spring from rest: u = (dG/K)(1 - cos wt), E_c = dG u - K u^2/2,
+    so r = E_c / W2_ext = 1 - K u / (2 dG) in [0, 1): never released, its max -> 1 as t -> 0.
+    The same with a negative stiffness (-K: u = (dG/K)(cosh wt - 1)): r = 1 + K u / (2 dG)
+    passes 2 where K u = 2 dG, i.e. cosh wt = 3, whatever the sampling of t."""
+    from hmodel.burst_rule import RELEASE, energy_release
+    dG, K, m = 3.0, 7.0, 2.0
+    w = math.sqrt(K / m)
+    for n in (50, 400):
+        t = np.linspace(0.0, 3 * 2 * math.pi / w, n)
+        u = dG / K * (1 - np.cos(w * t))
+        r = energy_release(t, dG * u - 0.5 * K * u * u + 0.1, dG * u)   # a floor of 0.1 J
+        assert not r["released"] and math.isnan(r["t_release"])
+        assert 1 - (w * t[1]) ** 2 / 4 - 1e-12 <= r["ratio_max"] < 1
+        t = np.linspace(0.0, 4.0 / w, n)
+        u = dG / K * (np.cosh(w * t) - 1)
+        r = energy_release(t, dG * u + 0.5 * K * u * u, dG * u)
+        assert r["released"] and RELEASE == 2.0
+        t_exact = math.acosh(3.0) / w
+        assert t_exact <= r["t_release"] <= t_exact + (t[1] - t[0]) + 1e-12
+    with pytest.raises(ValueError, match="multiple"):
+        energy_release([0.0], [0.0], [0.0], multiple=1.0)
+    r = energy_release([0.0, 1.0], [0.0, 0.0], [0.0, 0.0])         # dG = 0: nothing put in
+    assert math.isnan(r["ratio_max"]) and not r["released"]

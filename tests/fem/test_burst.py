@@ -239,10 +239,10 @@ def test_dt_study_the_outcome_and_the_measure_do_not_move():
     (dc from the sizing rule) at 20, 40 and 60 steps a period keep their outcomes, RELEASE
     tells them apart at every dt (past passes 2 x W2_ext, below never passes W2_ext), and the
     past run passes RELEASE at the same time to within one time step of the coarsest (0.05 T1;
-    measured 6.55, 6.55, 6.53 T1) -- where ke_growth, E_c over E_c after one step, grows with
-    1/dt^2 (measured past 2.7e5 / 9.2e5 / 2.0e6, below 189 / 672 / 1470). The energy check
-    converges with the integrator's order through the burst (measured 1.4e-4, 3.6e-5, 1.6e-5
-    on the past run: order 1.97 then 2.0): its ratio from 20 to 60 steps is at least 3^1.8."""
+    measured 6.050, 6.025, 6.017 T1) -- where ke_growth, E_c over E_c after one step, grows with
+    1/dt^2 (measured past 2.6e5 / 9.2e5 / 2.0e6, below 189 / 672 / 1470). The energy check
+    converges with the integrator's order through the burst (measured 1.40e-4, 3.55e-5, 1.59e-5
+    on the past run: order 1.98 then 2.0): its ratio from 20 to 60 steps is at least 3^1.8."""
     dc = _rule_dc()
     out = {}
     for n in (20, 40, 60):

@@ -312,9 +312,8 @@ def test_energy_balance_of_every_step(burst_R2):
 def test_dt_study_the_outcome_and_the_measure_do_not_move(params, path_R2):
     """R = -2 from 0.90 (dc from the sizing rule) at 20, 40 and 60 steps a period: the outcomes
     stay, RELEASE tells past from below at each dt, and the past run passes it at the same time
-    to within one time step of the coarsest (measured 18.60 T1 at all three: the crossing lies
-    between two rows common to the three grids); ke_growth meanwhile grows as 1/dt^2 (past
-    1.8e6 / 7.1e6 / 1.6e7 measured at 20 Pa)."""
+    to within one time step of the coarsest (measured 23.050, 23.025, 23.017 T1); ke_growth
+    meanwhile grows as 1/dt^2 (past 3.1e6 / 1.2e7 / 2.8e7)."""
     dc = path_R2[2].missed()
     t = []
     for n in (20.0, 40.0, 60.0):

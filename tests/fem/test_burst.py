@@ -264,7 +264,7 @@ def test_dc_scan_brackets_the_dynamic_limit_load():
     """Statics against dynamics (``fem.burst.limit_bracket``): from the c peak the path samples,
     held at c_peak + dc, the specimen settles below a dynamic limit load and bursts above it,
     and that limit lies above the sampled peak by at most the sizing rule c_peak - c_(peak-1)
-    (the path's true peak lies within a step): at the path's step 1e-5 the limit is 11.4-11.8
+    (the path's true peak lies within a step): at the path's step 1e-5 the limit is 11.40-11.44
     Pa above the sampled peak (rule 23.5 Pa), at 5e-6 1.10-1.15 Pa (rule 11.8 Pa: the sampled
     peak one step of 5e-6 nearer the true one; finer steps sample the same strain and keep
     1.1 Pa). Bisected to 1 Pa: the bracket [lo, hi] inside [0, rule] at both steps, and the

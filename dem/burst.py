@@ -443,6 +443,7 @@ def theory_verdict(eqs, fails, noise, dc) -> dict:
            "k_path_ratio": float(k[-1] / k[0]) if len(k) and k[0] != 0 else nan,
            "k_noise": noise, "c_cross": nan, "c_cross_band": [nan, nan], "eps1_cross": nan,
            "overshoot_c": nan, "overshoot_eps1": nan, "finite_step_failures": 0,
+           "c_peak_rest": float(c[-1]) if len(c) else nan,
            "verdict": "no verdict", "why": ""}
     if not len(k) or not np.all(np.isfinite(k)) or not math.isfinite(noise):
         out["why"] = "no k_path at every equilibrium"

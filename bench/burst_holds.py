@@ -24,7 +24,7 @@ from dem.burst import BurstOptions, H, hold, ke_growth, wall_mass_rule  # noqa: 
 from dem.simulation import Simulation                            # noqa: E402
 
 COLUMNS = ["switch", "variant", "wall_mass", "outcome", "steps", "c_target", "c_end", "de1_end",
-           "ke_growth", "w2_int_end", "eq1_residual", "wall_time"]
+           "ke_growth", "w2_int_end", "eq1_bookkeeping", "wall_time"]
 
 
 def _task(args):
@@ -33,7 +33,7 @@ def _task(args):
     r = hold(st, ratio, target, opts, threads=1)
     h = r.history
     return [sw, name, r.wall_mass, r.outcome, r.steps, target, h[-1, 4], h[-1, 2] - h[0, 2],
-            ke_growth(h[:, 8]), h[-1, H["w2_int"]], float(h[:, H["eq1_residual"]].max()),
+            ke_growth(h[:, 8]), h[-1, H["w2_int"]], float(h[:, H["eq1_bookkeeping"]].max()),
             time.time() - t0]
 
 

@@ -3,11 +3,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
 
 from hmodel import options as opt     # the command-line rules shared by every CLI
+from hmodel.burst_rule import RELEASE
 from hmodel.io import fmt
 
 from .threads import available_threads
@@ -199,7 +201,9 @@ def _burst_options(a, n_disks=None):
                             max_steps=a.max_steps, fail_strain=a.fail_strain, hold=a.hold,
                             wall_mass=a.wall_mass, wall_period_steps=a.wall_period_steps,
                             relax_max_steps=a.relax_max_steps, stairs=a.stairs,
-                            max_holds=a.max_holds).validate(n_disks)
+                            max_holds=a.max_holds, probes=not a.no_probes,
+                            probe_d_eps1=a.probe_d_eps1,
+                            probe_rate=a.probe_rate).validate(n_disks)
     except ValueError as e:       # name the option as the command line spells it
         msg = str(e)
         name = msg.split("=", 1)[0]
@@ -215,14 +219,28 @@ def cmd_burst(a):
                         stage=a.stage, resume=a.resume, scheduler=a.scheduler,
                         verbose=not a.quiet)
     a.stage.wrote("params.json", "burst.csv", "history.csv", "paths.csv", "rest.csv",
-                  "stairs.csv", "summary.json", "fig_burst_c.png", "fig_burst_ke.png",
-                  "fig_burst_strain.png", "fig_burst_ledger.png", "fig_burst_anatomy.png")
+                  "stairs.csv", "probes.csv", "summary.json", "fig_burst_c.png",
+                  "fig_burst_ke.png", "fig_burst_strain.png", "fig_burst_ledger.png",
+                  "fig_burst_anatomy.png", "fig_burst_k.png")
     for r in rows:
+        loaded = (f"loaded {r['c_loaded'] / 1e3:.2f} kPa" if math.isfinite(r["c_loaded"]) else
+                  "past the loaded path's last record")
+        release = (f"E_c passed {RELEASE:g} W2_ext at {r['t_release']:.3g} s" if r["released"]
+                   else f"E_c at most {r['ke_w2ext_max']:.2g} W2_ext")
         print(f"R = {r['ratio']:g}, f = {r['start_fraction']:g}, {r['switch']} (c at rest "
-              f"{r['c_switch'] / 1e3:.2f} kPa, loaded {r['c_loaded'] / 1e3:.2f} kPa, + dc, eta "
-              f"{r['eta_switch']:.4f}, {r['hold'].replace('_', ' ')}): {r['outcome']} after "
-              f"{r['steps']} steps, backbone kinetic energy x{r['ke_growth']:.3g}, W2_int at the "
-              f"end {r['w2_int_end']:.3g} J, Eq. 1 residual {r['eq1_residual']:.1e}")
+              f"{r['c_switch'] / 1e3:.2f} kPa, {loaded}, + dc, eta {r['eta_switch']:.4f}, "
+              f"{r['hold'].replace('_', ' ')}, k_path at the start {r['k_path_switch']:.3g} Pa): "
+              f"{r['outcome']} after {r['steps']} steps; {release}, backbone E_c at the end "
+              f"{r['ke_end_over_bound']:.3g} x the equilibrium bound; W2_int at the end "
+              f"{r['w2_int_end']:.3g} J; unstable contacts up to {r['n_unstable_max']:.0f} "
+              f"(held without a change of load: up to {r['unstable_noise_max']:.0f}); "
+              f"bookkeeping of Eq. 1 closes to {r['eq1_bookkeeping']:.1e}")
+    for p in s["paths"]:
+        v = p.get("theory") or {}
+        if v:
+            print(f"R = {p['ratio']:g}, f = {p['start_fraction']:g}: theory {v['verdict']}: "
+                  f"{v['why']}; k_path = 0 at c = {v['c_cross'] / 1e3:.3f} kPa, the dead load "
+                  f"held {v['overshoot_c']:.0f} Pa (eps1 {v['overshoot_eps1']:.2e}) past it")
     print(f"burst: {len(rows)} runs -> {os.path.join(a.out, 'burst.csv')}, history.csv, "
           f"paths.csv, figures; wall time {time.time() - t0:.1f} s")
 
@@ -415,6 +433,13 @@ def build_parser() -> opt.Parser:
                    help="the staircase's first step of c: (loaded peak - c at rest) / this")
     u.add_argument("--max-holds", type=opt.integer(2), default=40,
                    help="cap of the staircase's holds (the search then ends without a past run)")
+    u.add_argument("--probe-d-eps1", type=opt.real(0, 1e-3, hi_open=False), default=1e-5,
+                   help="the kinematic probe at every equilibrium: axial strain moved along the "
+                        "path, 0 < value <= 1e-3 [-] (default 1e-5; docs/burst.md: the rule)")
+    u.add_argument("--probe-rate", type=opt.real(0, 10, hi_open=False), default=1e-3,
+                   help="the probe's axial strain rate [1/s], 0 < value <= --rate (default 0.001)")
+    u.add_argument("--no-probes", action="store_true",
+                   help="no kinematic probes (no k_path, no verdict of the theory)")
     u.add_argument("--resume", action="store_true",
                    help="keep the paths, relaxations and holds already in DIR (burst_runs.jsonl, "
                         "rest/)")

@@ -9,22 +9,35 @@ diffuse failure.  Nicot et al. (2014): the macroscopic W2 equals the sum over th
 (paper Eq. 15); failure comes with contacts opening and sliding.
 
 * ``contact_state(sim) -> ContactState``: the grain and wall contacts of a ``Simulation`` at one
-  instant, keyed so that the keys survive the neighbour-list rebuilds (``dem.burst.ContactTable``'s
-  keys: grain i (N + 4) + j with i < j, wall p (N + 4) + N + w), with the force on the first
-  disk, the branch, the unit normal, the normal and tangential forces, the rolling moment and
-  whether the contact slides (and rolls) at its cap; and the positions and walls.
-* ``anatomy(s0, s, n_disks) -> dict`` of the ``ANATOMY_COLUMNS`` between t = 0 (``s0``) and now.
+  instant, the positions of the last step's force evaluation (``step_positions``: the force,
+  the branch and the sliding flag of one time), keyed so that the keys survive the
+  neighbour-list rebuilds (grain i (N + 4) + j with i < j, wall p (N + 4) + N + w), with the
+  force on the first disk, the branch, the unit normal, the normal and tangential forces, the
+  rolling moment and whether the contact slides (and rolls) at its cap; and the positions and
+  walls of that instant.
+* ``anatomy(s0, s, n_disks, s_prev) -> dict`` of the ``ANATOMY_COLUMNS``: what changed between
+  t = 0 (``s0``) and now, and the unstable contacts of the last increment (``s_prev`` to now,
+  ``UNSTABLE_WINDOW`` checks: Hadda et al.'s d f . d l over a small loading increment).
+* ``contact_work(s0, s)``: the paper's Eq. 15 sum between two instants.
 * ``write_anatomy_vtk`` (ParaView: disks with their velocity fluctuation, contacts with their own
   W2) and ``plot_anatomy`` (the sample, its negative-W2 contacts, its clusters and velocity
   fluctuation, one panel per state).
 
 Conventions (as ``dem.probes`` and ``dem.burst``): f the force on the first disk by the second
 (or by the wall) [N], l the branch from the first disk to the second, x_j - x_i (wall: from the
-disk to the wall along the wall's axis) [m]; a contact's own secant second-order work since
-t = 0 is w2_c = (f - f(0)) . (l - l(0)) [J], over the union of the contacts at 0 and now, f = 0
-where a contact is absent, its branch then the one the positions give (paper Eq. 15); an elastic
-contact being loaded gives w2_c > 0.  These functions run at the checks only (every 1000 steps):
-NumPy, no kernel of their own.
+disk to the wall along the wall's axis) [m]; a contact's own second-order work between two
+instants a and b is w2_c = (f(b) - f(a)) . (l(b) - l(a)) [J], over the union of the contacts at
+a and b, f = 0 where a contact is absent, its branch then the one the positions give (paper
+Eq. 15); an elastic contact being loaded gives w2_c > 0.  These functions run at the checks
+only (every 1000 steps): NumPy, no kernel of their own.
+
+**Unstable contacts above their noise.** Counted over the whole time since t = 0 (a secant over
+1e5 steps and ~1 % of strain) with the threshold at exactly 0, a packing held without any change
+of load showed 16 % of its contacts "unstable" (300 disks): the count was noise. Hadda et al.
+take a contact's d f . d l over a small loading increment; here the increment is the last
+``UNSTABLE_WINDOW`` checks (5000 steps at the checks' 1000), and the noise of the count is
+measured on the same state held with no change of load (``dem.burst``: each switch's
+``baseline`` run), whose counts are reported beside the run's, with the excess.
 """
 from __future__ import annotations
 
@@ -38,8 +51,19 @@ import numpy as np
 # the history columns of a check (``dem burst``'s history.csv, ``dem probes``'
 # probe_histories.csv), in this order; ``anatomy`` returns exactly these keys
 ANATOMY_COLUMNS = ["sliding_share", "contacts_lost", "contacts_created", "coordination",
-                   "n_unstable", "n_clusters", "largest_cluster", "w2n_int", "w2t_int",
-                   "w2_int_secant"]
+                   "n_unstable_raw", "n_unstable", "n_unstable_walls", "n_clusters",
+                   "largest_cluster", "w2n_int", "w2t_int", "w2_int_secant"]
+# the increment of the unstable contacts: the last this many checks (``dem.settle``)
+UNSTABLE_WINDOW = 5
+# an unstable contact's d f . d l is below -UNSTABLE_TAU times the contacts' energy scale at the
+# start, mean fn^2 / kn (``energy_scale``): for a contact loaded along its normal, d f . d l ~
+# kn dl^2, so the threshold is a relative change of its overlap of about 1 % over the increment.
+# Measured at 2000 disks (the 2000-disk staircase's last equilibrium, increments of 5000 steps
+# over 0.42 s): held with no change of load, 740-1050 contacts of 2940 have d f . d l < 0 (the raw
+# count), 7-298 below -1e-8, 0-63 below -1e-6 (a slip), 0-1 below -1e-4 of the scale; held at
+# +100 Pa (it bursts), 468 below -1e-4 at the first increment, 728-1123 after
+UNSTABLE_TAU = 1e-4
+INWARD = np.array([1.0, -1.0, 1.0, -1.0])     # a wall's inward direction along its axis
 
 # A contact slides when |f_t| >= (1 - SLIDE_TOL) mu fn, fn the normal force of the step that set
 # f_t (positions x - dt v).  Those positions are the kernel's to a rounding of x (1e-16 m
@@ -81,31 +105,41 @@ def _at_cap(value, limit):
     return (limit > 0.0) & (np.abs(value) >= (1.0 - SLIDE_TOL) * limit)
 
 
+def step_positions(sim):
+    """The positions (N, 2) and walls (4,) [m] of the last step's force evaluation, x(n) and
+    walls(n) when ``sim`` is at x(n+1): the leapfrog's x(n+1) = x(n) + dt v(n+1/2) gives x - dt v,
+    the walls' last move ``prev`` (inward) gives walls - INWARD prev.  The tangential forces and
+    rolling moments the pair list holds were set there."""
+    return sim.x - sim.dt * sim.v, sim.walls - INWARD * sim.prev
+
+
 def contact_state(sim) -> ContactState:
-    """The contacts of ``sim`` now (``Simulation.snapshot``: the grain contacts that touch at the
-    current positions with their stored tangential history, the wall contacts), as a
-    ContactState.  Sliding is judged against the normal force of the step that set the
-    tangential force: the leapfrog's x(n+1) = x(n) + dt v(n+1/2) gives that step's positions as
-    x - dt v (with the normal dashpot, whose force needs v(n-1/2), the dashpot part is taken at
-    v(n+1/2): the flag is then approximate)."""
+    """The contacts of ``sim`` at the positions of the last step's force evaluation
+    (``step_positions``), as a ContactState: the grain contacts that touch there, with the
+    tangential force and rolling moment that step set (the pair list's history) and the normal
+    force kn overlap there, and the wall contacts there; the branches, positions and walls of
+    that instant too, so that force, branch and sliding flag belong to one time (with the
+    normal dashpot, whose force needs v(n-1/2), its part of the sliding test is taken at
+    v(n+1/2): the flag is then approximate; the forces are the elastic parts)."""
+    from . import kernels
     p = sim.params
     n, base = sim.n, sim.n + 4
-    snap = sim.snapshot()
+    xs, ws = step_positions(sim)
     pl = sim.pairs
-    ci, cj = snap.ci.astype(np.int64), snap.cj.astype(np.int64)
+    ci, cj, fx, fy, fn, wp, ww, wf = kernels.contact_snapshot(xs, sim.r, pl.pi, pl.pj, pl.ft,
+                                                              ws, p.kn)
     # the snapshot keeps the pair list's order, which is sorted by (pi, pj): each contact's pair
     # index (its rolling history) by a search on the keys
     k = np.searchsorted(pl.pi.astype(np.int64) * base + pl.pj, ci * base + cj)
-    branch_g = sim.x[cj] - sim.x[ci]
+    branch_g = xs[cj] - xs[ci]
     normal_g = branch_g / np.hypot(branch_g[:, 0], branch_g[:, 1])[:, None]
-    force_g = np.column_stack([snap.fx, snap.fy])
+    force_g = np.column_stack([fx, fy])
     ft_g = pl.ft[k].copy()
     mr_g = pl.mr[k].copy()
     # the normal force of the step that set f_t and M (the kernel's _normal_force)
-    xs = sim.x - sim.dt * sim.v
-    ds = xs[cj] - xs[ci]
+    ds = branch_g
     rs = sim.r[ci] + sim.r[cj]
-    fn_s = p.kn * (rs - np.hypot(ds[:, 0], ds[:, 1]))
+    fn_s = fn.copy()
     if p.normal_damping_ratio > 0.0:
         meff = sim.m[ci] * sim.m[cj] / (sim.m[ci] + sim.m[cj])
         vn = np.sum((sim.v[cj] - sim.v[ci]) * ds, axis=1) / np.hypot(ds[:, 0], ds[:, 1])
@@ -118,23 +152,36 @@ def contact_state(sim) -> ContactState:
     else:
         sliding_g = rolling_g = np.zeros(len(ci), bool)
     # wall contacts: the normal along the wall's axis, towards the wall
-    wp, ww = snap.wp.astype(np.int64), snap.ww.astype(np.int64)
     axis = ww // 2
     towards = np.where(ww % 2 == 0, -1.0, 1.0)          # left and bottom walls lie at lower x, y
     rows = np.arange(len(wp))
     normal_w = np.zeros((len(wp), 2))
     normal_w[rows, axis] = towards
     branch_w = np.zeros((len(wp), 2))
-    branch_w[rows, axis] = sim.walls[ww] - sim.x[wp, axis]
-    force_w = -snap.wf[:, None] * normal_w
+    branch_w[rows, axis] = ws[ww] - xs[wp, axis]
+    force_w = -wf[:, None] * normal_w
     keys = np.concatenate([ci * base + cj, wp * base + n + ww])
     order = np.argsort(keys, kind="stable")
     cat = lambda g, w: np.concatenate([g, w])[order]
     zw = np.zeros(len(wp))
     return ContactState(keys[order], cat(force_g, force_w), cat(branch_g, branch_w),
-                        cat(normal_g, normal_w), cat(snap.fn, snap.wf), cat(ft_g, zw),
+                        cat(normal_g, normal_w), cat(fn, wf), cat(ft_g, zw),
                         cat(mr_g, zw), cat(sliding_g, zw.astype(bool)),
-                        cat(rolling_g, zw.astype(bool)), sim.x.copy(), sim.walls.copy())
+                        cat(rolling_g, zw.astype(bool)), xs, ws)
+
+
+def branches(keys, x, walls):
+    """Branch (K, 2) of each contact key [m] at positions ``x`` (N, 2) and ``walls`` (4,): x_j -
+    x_i, or from the disk to its wall along the wall's axis."""
+    n = len(x)
+    i, j = keys // (n + 4), keys % (n + 4)
+    out = np.zeros((len(keys), 2))
+    g = j < n
+    out[g] = x[j[g]] - x[i[g]]
+    w = ~g
+    wl = j[w] - n
+    out[np.flatnonzero(w), wl // 2] = walls[wl] - x[i[w], wl // 2]
+    return out
 
 
 def split_keys(keys, n_disks):
@@ -161,8 +208,7 @@ class OwnWork(NamedTuple):
 def own_work(s0: ContactState, s: ContactState) -> OwnWork:
     """w2_c = (f - f(0)) . (l - l(0)) of every contact at 0, now or both (f = 0 where absent;
     the branches from the positions of each instant, those of absent contacts included): the
-    terms of the paper's Eq. 15 (secant), as ``dem.burst.contact_work`` sums them."""
-    from .burst import _branches      # here: dem.burst may import this module
+    terms of the paper's Eq. 15 (secant), which ``contact_work`` sums."""
     if len(s0.x) != len(s.x):
         raise ValueError(f"contact states of {len(s0.x)} and {len(s.x)} disks; allowed: the "
                          "states of one sample")
@@ -180,17 +226,30 @@ def own_work(s0: ContactState, s: ContactState) -> OwnWork:
     f1[a1] = s.force
     df = f1 - f0
 
-    def branches(st, at, there):
+    def branch_of(st, at, there):
         # a state's own branches where the contact exists, the positions' elsewhere (the same
         # numbers: x_j - x_i, wall - x_p)
         out = np.empty((len(keys), 2))
         out[at] = st.branch
-        out[~there] = _branches(keys[~there], st.x, st.walls)
+        out[~there] = branches(keys[~there], st.x, st.walls)
         return out
 
-    l0 = branches(s0, a0, existed)
-    dl = branches(s, a1, present) - l0
+    l0 = branch_of(s0, a0, existed)
+    dl = branch_of(s, a1, present) - l0
     return OwnWork(keys, df, dl, l0, _dot(df, dl), present, existed)
+
+
+def energy_scale(s: ContactState, kn: float) -> float:
+    """The contacts' energy scale [J]: mean fn^2 / kn over the contacts of ``s`` (twice a mean
+    contact's normal elastic energy; 0 without contacts), the unit of ``UNSTABLE_TAU``."""
+    return float(np.mean(np.square(s.fn)) / kn) if len(s.fn) else 0.0
+
+
+def contact_work(s0: ContactState, s: ContactState) -> float:
+    """sum_c df . dl [J] between two instants (paper Eq. 15, secant) over the grain and wall
+    contacts at either (``own_work``). By Eq. 14 it equals the walls' secant second-order work
+    less sum_p dF_p . dx_p (the unbalanced forces'), at the positions of the two instants."""
+    return float(np.sum(own_work(s0, s).w2))
 
 
 def _dot(a, b):
@@ -199,10 +258,12 @@ def _dot(a, b):
 
 
 def unstable_clusters(keys, unstable, n_disks):
-    """The clusters of unstable grain contacts: connected components of the graph whose nodes
-    are the grain contacts flagged ``unstable`` and whose edges join two contacts that share a
-    disk.  Two contacts share a disk exactly when they are edges of one connected component of
-    the disks' graph restricted to those contacts, so the components are found on the disks
+    """The clusters of unstable contacts, grain and wall alike: connected components of the
+    graph whose nodes are the contacts flagged ``unstable`` and whose edges join two contacts
+    that share a disk (a wall contact has one disk; the wall is not a node: two contacts on one
+    wall are not linked through it).  Two contacts share a disk exactly when they are edges of
+    one connected component of the disks' graph restricted to the grain contacts, a wall
+    contact then belonging to its disk's component, so the components are found on the disks
     (scipy.sparse.csgraph; no contact-to-contact graph, whose edges grow as the square of the
     contacts a disk has).  Returns (label (K,) int: the cluster of each contact, -1 for the
     others, clusters numbered by decreasing size then first contact; sizes (clusters,) in
@@ -210,11 +271,12 @@ def unstable_clusters(keys, unstable, n_disks):
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     i, j, grain = split_keys(np.asarray(keys), n_disks)
-    sel = np.flatnonzero(np.asarray(unstable, bool) & grain)
+    sel = np.flatnonzero(np.asarray(unstable, bool))
     label = np.full(len(keys), -1, np.int64)
     if len(sel) == 0:
         return label, np.zeros(0, np.int64)
-    g = coo_matrix((np.ones(len(sel)), (i[sel], j[sel])), shape=(n_disks, n_disks)).tocsr()
+    sg = sel[grain[sel]]
+    g = coo_matrix((np.ones(len(sg)), (i[sg], j[sg])), shape=(n_disks, n_disks)).tocsr()
     _, comp = connected_components(g, directed=False)
     c = comp[i[sel]]
     sizes = np.bincount(c)
@@ -234,9 +296,12 @@ def contact_counts(s: ContactState, n_disks):
     return np.bincount(i, minlength=n_disks) + np.bincount(j[grain], minlength=n_disks)
 
 
-def anatomy(s0: ContactState, s: ContactState, n_disks) -> dict:
-    """The anatomy of the contacts between t = 0 (``s0``) and now (``s``), the
-    ``ANATOMY_COLUMNS`` of a check:
+def anatomy(s0: ContactState, s: ContactState, n_disks, s_prev: ContactState | None = None,
+            tau: float = 0.0) -> dict:
+    """The anatomy of the contacts between t = 0 (``s0``) and now (``s``), and of the last
+    increment (``s_prev`` to now; None: since 0), the ``ANATOMY_COLUMNS`` of a check (``tau``
+    [J] >= 0: the threshold of an unstable contact; in a run UNSTABLE_TAU x ``energy_scale`` at
+    the start, ``dem.settle``):
 
     * ``sliding_share``: the grain contacts at the Coulomb cap now over the grain contacts now
       (NaN without any);
@@ -245,19 +310,21 @@ def anatomy(s0: ContactState, s: ContactState, n_disks) -> dict:
       contacts or more now (wall contacts counted, as ``dem.settle.backbone_kinetic_energy``'s
       backbone), C_b the grain contacts now between two of them (one pass: a disk left with one
       contact by its neighbours' exclusion stays in; NaN with no backbone);
-    * ``n_unstable``: the contacts, grain and wall, whose own secant second-order work since 0 is
-      negative, w2_c = (f - f(0)) . (l - l(0)) < 0, over the union of the contacts at 0 and now
-      (``own_work``);
-    * ``n_clusters``, ``largest_cluster``: the clusters of the unstable grain contacts (linked
-      through shared disks, ``unstable_clusters``): their number and the largest's size in
-      contacts (0 and 0 without any);
+    * ``n_unstable_raw``: the contacts, grain and wall, whose own second-order work over the
+      increment is negative, w2_c = (f - f(prev)) . (l - l(prev)) < 0, over the union of the
+      contacts at ``s_prev`` and now (``own_work``: Hadda et al.'s d f . d l): mostly noise;
+      ``n_unstable``: those with w2_c < -``tau``, the unstable contacts; ``n_unstable_walls``:
+      the wall contacts among them;
+    * ``n_clusters``, ``largest_cluster``: the clusters of those unstable contacts, grain and
+      wall (linked through shared disks, ``unstable_clusters``): their number and the largest's
+      size in contacts (0 and 0 without any);
     * ``w2n_int``, ``w2t_int`` [J]: the grain contacts' sum of w2_c split on the normal at 0,
       sum (df . n0)(dl . n0) and sum (df . t0)(dl . t0), n0 = l(0) / |l(0)| (the branch at 0 of
       the positions at 0, for a contact created since as well), t0 = z x n0, as ``dem.probes``'
       w2n, w2t; ``w2_int_secant`` [J]: w2n_int + w2t_int + the wall contacts' w2_c, the paper's
-      Eq. 15 sum (secant), equal to ``dem.burst.contact_work``.
-    ``n_disks``: N of both states (their keys are built on it)."""
-    if not (len(s0.x) == len(s.x) == n_disks):
+      Eq. 15 sum since 0 (secant), ``contact_work``.
+    ``n_disks``: N of the states (their keys are built on it)."""
+    if not (len(s0.x) == len(s.x) == n_disks) or (s_prev is not None and len(s_prev.x) != n_disks):
         raise ValueError(f"n_disks={n_disks!r}; allowed: the states' number of disks "
                          f"({len(s0.x)}, {len(s.x)})")
     ow = own_work(s0, s)
@@ -269,8 +336,12 @@ def anatomy(s0: ContactState, s: ContactState, n_disks) -> dict:
     w2n = float(np.sum(_dot(dfg, n0) * _dot(dlg, n0)))
     w2t = float(np.sum(_dot(dfg, t0) * _dot(dlg, t0)))
     w2w = float(np.sum(ow.w2[~grain]))
-    unstable = ow.w2 < 0.0
-    _, sizes = unstable_clusters(ow.keys, unstable, n_disks)
+    if not (math.isfinite(tau) and tau >= 0):
+        raise ValueError(f"tau={tau!r}; allowed range: tau >= 0 [J] (finite)")
+    inc = ow if s_prev is None else own_work(s_prev, s)
+    unstable = inc.w2 < -tau
+    _, _, inc_grain = split_keys(inc.keys, n_disks)
+    _, sizes = unstable_clusters(inc.keys, unstable, n_disks)
     _, j_now, g_now = split_keys(s.keys, n_disks)
     n_now = int(np.count_nonzero(g_now))
     cnt = contact_counts(s, n_disks)
@@ -283,7 +354,9 @@ def anatomy(s0: ContactState, s: ContactState, n_disks) -> dict:
             "contacts_lost": int(np.count_nonzero(grain & ow.existed & ~ow.present)),
             "contacts_created": int(np.count_nonzero(grain & ow.present & ~ow.existed)),
             "coordination": 2.0 * c_b / n_b if n_b else math.nan,
+            "n_unstable_raw": int(np.count_nonzero(inc.w2 < 0.0)),
             "n_unstable": int(np.count_nonzero(unstable)),
+            "n_unstable_walls": int(np.count_nonzero(unstable & ~inc_grain)),
             "n_clusters": int(len(sizes)),
             "largest_cluster": int(sizes[0]) if len(sizes) else 0,
             "w2n_int": w2n, "w2t_int": w2t, "w2_int_secant": w2n + w2t + w2w}
@@ -293,9 +366,6 @@ def anatomy(s0: ContactState, s: ContactState, n_disks) -> dict:
 # ----------------------------------------------------------------------------------------------
 # The field of velocities, the VTU files for ParaView and the figure
 # ----------------------------------------------------------------------------------------------
-INWARD = np.array([1.0, -1.0, 1.0, -1.0])     # a wall's inward direction along its axis
-
-
 def wall_velocities(sim):
     """Each wall's velocity along its axis (4,) [m/s]: its last step's move (``sim.prev``, the
     servo's or the strain control's inward move, the same half step as the disks' velocities
@@ -315,7 +385,27 @@ def velocity_fluctuation(sim):
     return sim.v - v_aff
 
 
-def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState):
+def increment_on(keys, s_prev: ContactState | None, s: ContactState, n_disks, tau=0.0):
+    """The last increment's own second-order work (``own_work(s_prev, s)``) and its clusters of
+    unstable contacts (``unstable_clusters``) on the contact ``keys`` (sorted; e.g. the union of
+    the contacts at 0 and now): (w2 (K,) [J], 0 for a key absent from the increment; label (K,),
+    -1 for a stable or absent one: unstable below -``tau``). ``s_prev`` None: nothing (zeros,
+    -1)."""
+    w2 = np.zeros(len(keys))
+    label = np.full(len(keys), -1, np.int64)
+    if s_prev is None:
+        return w2, label
+    inc = own_work(s_prev, s)
+    lab, _ = unstable_clusters(inc.keys, inc.w2 < -tau, n_disks)
+    at = np.searchsorted(inc.keys, keys)
+    ok = (at < len(inc.keys)) & (inc.keys[np.minimum(at, len(inc.keys) - 1)] == keys)
+    w2[ok] = inc.w2[at[ok]]
+    label[ok] = lab[at[ok]]
+    return w2, label
+
+
+def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState, s_prev: ContactState | None = None,
+                      tau=None):
     """``out_dir/disks_{tag}.vtu`` and ``out_dir/contacts_{tag}.vtu`` (meshio, written atomically
     as ``dem.io`` writes; ParaView opens them).  Returns their paths.
 
@@ -324,11 +414,12 @@ def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState):
     [rad/s], ``n_contacts`` (grain and wall contacts now), ``backbone`` (1 with two contacts or
     more).  Contacts: a line between the two disks' centres now for every grain contact at t = 0
     (``s0``) or now (a contact lost since has zero force), cell data ``w2`` its own secant
-    second-order work since 0 [J] (``own_work``), ``w2_sign`` (-1, 0, 1), ``cluster`` (its
-    cluster of unstable contacts, 0 the largest, -1 for a contact with w2 >= 0:
-    ``unstable_clusters``), ``present`` (1 now, 0 lost), ``sliding`` (1 at the Coulomb cap),
-    ``rolling`` (1 at the rolling cap), ``normal_force`` [N], ``tangential_force`` |f_t| [N],
-    ``force`` |f| [N]."""
+    second-order work since 0 [J] (``own_work``), ``w2_sign`` (-1, 0, 1), ``w2_increment`` its
+    own second-order work over the last increment (``s_prev`` to now, Hadda et al.'s d f . d l;
+    0 without ``s_prev``), ``cluster`` (its cluster of unstable contacts of the increment, w2
+    below -``tau`` (default UNSTABLE_TAU x ``energy_scale`` of ``s0``), 0 the largest, -1 for a
+    stable one: ``unstable_clusters``; with no ``s_prev``, of the secant since 0), ``present`` (1 now, 0 lost), ``sliding`` (1 at the Coulomb cap), ``rolling`` (1 at the
+    rolling cap), ``normal_force`` [N], ``tangential_force`` |f_t| [N], ``force`` |f| [N]."""
     import meshio
 
     from .io import _atomic_meshio
@@ -337,7 +428,11 @@ def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState):
     n = sim.n
     s = contact_state(sim)
     ow = own_work(s0, s)
-    label, _ = unstable_clusters(ow.keys, ow.w2 < 0.0, n)
+    if tau is None:
+        tau = UNSTABLE_TAU * energy_scale(s0, sim.params.kn)
+    w2_inc, label = increment_on(ow.keys, s_prev, s, n, tau)
+    if s_prev is None:
+        label, _ = unstable_clusters(ow.keys, ow.w2 < 0.0, n)
     i, j, grain = split_keys(ow.keys, n)
     now = np.searchsorted(s.keys, ow.keys[grain])
     present = ow.present[grain]
@@ -357,7 +452,7 @@ def write_anatomy_vtk(out_dir, tag, sim, s0: ContactState):
                                     "spin": sim.w.copy(), "n_contacts": cnt.astype(np.int32),
                                     "backbone": (cnt >= 2).astype(np.int32)})
     w2 = ow.w2[grain]
-    cells = {"w2": w2, "w2_sign": np.sign(w2).astype(np.int32),
+    cells = {"w2": w2, "w2_sign": np.sign(w2).astype(np.int32), "w2_increment": w2_inc[grain],
              "cluster": label[grain].astype(np.int32), "present": present.astype(np.int32),
              "sliding": pick(s.sliding).astype(np.int32),
              "rolling": pick(s.rolling).astype(np.int32), "normal_force": fn,
@@ -399,14 +494,16 @@ def coarse_fluctuation(sim, s: ContactState, per_cell=9, max_cells=24):
 
 
 def plot_anatomy(path, panels, dpi=150):
-    """One PNG at ``path`` with a panel per (title, sim, s0) of ``panels``: the disks (light
-    fill), the walls, the grain contacts (at 0 or now, drawn between the centres now) with a
-    positive own second-order work since 0 thin and grey, the negative ones thick and red, the
-    largest cluster of those in dark blue, and the velocity fluctuation of the backbone disks as
-    arrows (cell means, ``coarse_fluctuation``), scaled per panel (the 90th percentile 0.9 cell
-    long; the key gives the scale; an arrow longer than 2.5 cells is drawn 2.5 cells long, in
-    orange).  The panel's title carries its ``anatomy`` figures.
-    ``panels``: [(title, Simulation now, ContactState at 0)], one or more (ValueError if none)."""
+    """One PNG at ``path`` with a panel per (title, sim, s0[, s_prev]) of ``panels``: the disks
+    (light fill), the walls, the grain contacts (at 0 or now, drawn between the centres now) with
+    a positive own second-order work thin and grey, the negative ones thick and red, the largest
+    cluster of those in dark blue (over the last increment, ``s_prev`` to now, when ``s_prev`` is
+    given: the unstable contacts of ``anatomy``; otherwise the secant since 0), and the velocity
+    fluctuation of the backbone disks as arrows (cell means, ``coarse_fluctuation``), scaled per
+    panel (the 90th percentile 0.9 cell long; the key gives the scale; an arrow longer than 2.5
+    cells is drawn 2.5 cells long, in orange).  The panel's title carries its ``anatomy``
+    figures.  ``panels``: [(title, Simulation now, ContactState at 0[, ContactState at the
+    increment's start])], one or more (ValueError if none)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -419,15 +516,20 @@ def plot_anatomy(path, panels, dpi=150):
     width = min(7.0, 14.0 / len(panels))
     fig, axes = plt.subplots(1, len(panels), figsize=(width * len(panels), width * h / w + 1.0),
                              squeeze=False, constrained_layout=True)
-    for ax, (title, sim, s0) in zip(axes[0], panels):
+    for ax, (title, sim, s0, *rest) in zip(axes[0], panels):
         n = sim.n
+        s_prev = rest[0] if rest else None
         s = contact_state(sim)
-        a = anatomy(s0, s, n)
+        tau = UNSTABLE_TAU * energy_scale(s0, sim.params.kn) if s_prev is not None else 0.0
+        a = anatomy(s0, s, n, s_prev, tau)
         ow = own_work(s0, s)
-        label, sizes = unstable_clusters(ow.keys, ow.w2 < 0.0, n)
+        if s_prev is None:
+            w2, (label, _) = ow.w2, unstable_clusters(ow.keys, ow.w2 < 0.0, n)
+        else:
+            w2, label = increment_on(ow.keys, s_prev, s, n, tau)
         i, j, grain = split_keys(ow.keys, n)
         seg = np.stack([sim.x[i[grain]], sim.x[j[grain]]], axis=1)
-        neg, lab = ow.w2[grain] < 0.0, label[grain]
+        neg, lab = w2[grain] < -tau, label[grain]
         # thinner lines for larger samples: 2000 disks and fewer as drawn here, 12,000 at 0.45
         lw = max(0.45, min(1.0, math.sqrt(2000 / n)))
         ax.add_collection(EllipseCollection(2 * sim.r, 2 * sim.r, 0.0, units="xy",
@@ -461,7 +563,9 @@ def plot_anatomy(path, panels, dpi=150):
         ax.set_ylim(wl[2] - 0.02 * (wl[3] - wl[2]), wl[3] + 0.02 * (wl[3] - wl[2]))
         ax.set_aspect("equal")
         ax.set_axis_off()
-        ax.set_title(f"{title}\n{a['n_unstable']} contacts with w2 < 0 of {len(ow.keys)}; "
+        over = (f"< -{UNSTABLE_TAU:g} fn^2/kn over the last increment" if s_prev is not None
+                else "< 0 since 0")
+        ax.set_title(f"{title}\n{a['n_unstable']} contacts with w2 {over} of {len(ow.keys)}; "
                      f"{a['n_clusters']} clusters, largest {a['largest_cluster']}\n"
                      f"sliding {100 * a['sliding_share']:.1f} %, z = {a['coordination']:.2f}, "
                      f"W2_int (secant) = {a['w2_int_secant']:.3g} J", fontsize=8)

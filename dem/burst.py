@@ -47,7 +47,7 @@ sum_c df . dl over the grain and wall contacts since the switch (Eq. 15 form, se
 it is the walls' less sum_p dF_p . dx_p), and the energy ledger from the switch (``dem.ledger``):
 the walls' work, the contact work and its split into stored and dissipated energy, the Cundall
 damping's work, and Eq. 1 in second-order form, E_c - E_c(0) = W2_ext - W2_int + W_damp + U0,
-closed to round-off (``w2_ext``, ``w2_int``, ``u0``, ``eq1_residual``).
+closed to round-off (``w2_ext``, ``w2_int``, ``u0``, ``eq1_bookkeeping``).
 """
 from __future__ import annotations
 
@@ -56,14 +56,16 @@ import math
 import os
 import sys
 import time
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
 
 from hmodel.burst import check_ratio
+from hmodel.burst_rule import RELEASE
 
 from . import kernels
-from .anatomy import ANATOMY_COLUMNS, contact_state
+from .anatomy import ANATOMY_COLUMNS, UNSTABLE_WINDOW, contact_state
 from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS, Ledger
 from .settle import HISTORY_COLUMNS as SETTLE_COLUMNS, RULE_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
@@ -96,9 +98,20 @@ BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction
                  "ke_growth", "ke_max", "ke_backbone_max", "w2_ext_end", "w2_walls_end",
                  "w2_int_end", "t_end", "steps", "de1_end", "de2_end", "creep_rate",
                  "unbalanced_end", "path_steps", "n_disks", "w2_ext_held_end",
-                 "w2_int_secant_end", "w_damp_end", "u0_end", "eq1_residual", "ke_switch",
+                 "w2_int_secant_end", "w_damp_end", "u0_end", "eq1_bookkeeping", "ke_switch",
                  "c_rest", "c_loaded", "hold", "c_peak_loaded", "eta_peak_loaded", "wall_mass",
-                 "g_held", "holds", "rest_search"]
+                 "g_held", "holds", "rest_search",
+                 # the growth against the held step's work and the equilibrium bound (``growth``)
+                 "ke_w2ext_max", "t_release", "released", "ke_end_over_bound",
+                 # the kinematic probe at the switch's start, the path's verdict (``staircase``)
+                 "k_path_switch", "k_noise", "c_cross", "overshoot_c", "overshoot_eps1",
+                 "verdict",
+                 # the anatomy: unstable contacts of the increment, against the baseline run
+                 # (the switch's state held with no change of load), and at the burst's onset
+                 "n_unstable_max", "unstable_noise_mean", "unstable_noise_max",
+                 "n_unstable_excess", "largest_cluster_max", "largest_cluster_noise_max",
+                 "t_onset", "n_unstable_onset", "largest_cluster_onset", "sliding_share_onset",
+                 "sliding_share_switch", "n_unstable_raw_max", "unstable_raw_noise_max"]
 
 
 class BurstOptions(NamedTuple):
@@ -127,6 +140,9 @@ class BurstOptions(NamedTuple):
     relax_max_steps: int = 1_000_000  # cap of a relaxation at fixed strain [steps]
     stairs: int = 8                 # the staircase's first step: (loaded peak - c at rest) / this
     max_holds: int = 40             # cap of the staircase's holds
+    probes: bool = True             # the kinematic probe of the path at every equilibrium
+    probe_d_eps1: float = 1e-5      # the probe's axial strain along the path [-]
+    probe_rate: float = 1e-3        # the probe's axial strain rate [1/s] (path_probe)
 
     def validate(self, n_disks=None) -> "BurstOptions":
         """ValueError naming the option and its range for a bad value; ``n_disks``: the
@@ -144,7 +160,10 @@ class BurstOptions(NamedTuple):
                   ("wall_period_steps", self.wall_period_steps >= 20,
                    "wall_period_steps >= 20 (the leapfrog resolves the walls' period)"),
                   ("stairs", self.stairs >= 1, "stairs >= 1"),
-                  ("max_holds", self.max_holds >= 2, "max_holds >= 2"))
+                  ("max_holds", self.max_holds >= 2, "max_holds >= 2"),
+                  ("probe_d_eps1", 0 < self.probe_d_eps1 <= 1e-3, "0 < probe_d_eps1 <= 1e-3"),
+                  ("probe_rate", 0 < self.probe_rate <= self.rate,
+                   "0 < probe_rate <= rate (the path's) [1/s]"))
         for name, ok, rng in checks:
             val = getattr(self, name)
             if not ok or not math.isfinite(val):
@@ -272,10 +291,14 @@ def proportional_path(state: State, ratio: float, opts: BurstOptions = BurstOpti
 # From rest: a state relaxed at fixed strain, and the c peak at rest along the path
 # ----------------------------------------------------------------------------------------------
 REST_COLUMNS = ["ratio", "start_fraction", "state", "eps1", "c_loaded", "c_rest", "drop",
-                "eta_rest", "outcome", "steps", "ke_end", "unbalanced_end"]
+                "eta_rest", "outcome", "steps", "ke_end", "unbalanced_end", "k_path"]
 STAIR_COLUMNS = ["ratio", "start_fraction", "hold", "role", "c_from", "c_target", "dc",
                  "outcome", "steps", "eps1_start", "eps1_end", "c_end", "ke_switch",
-                 "ke_backbone_max", "w2_int_end", "eq1_residual"]
+                 "ke_backbone_max", "w2_int_end", "eq1_bookkeeping", "from", "k_path_from",
+                 "k_path", "ke_w2ext_max", "ke_end_over_bound"]
+# rest.csv's probe columns, and probes.csv's (every kinematic probe of the path: ``path_probe``)
+PROBE_COLUMNS = ["ratio", "start_fraction", "key", "c_state", "c_before", "c_after", "eps1_before",
+                 "d_eps1", "k_path", "w2", "outcome", "steps", "wall_time"]
 
 
 class RelaxResult(NamedTuple):
@@ -326,17 +349,163 @@ def relax(state: State, ratio: float, opts: BurstOptions = BurstOptions(), threa
                        res.history, time.time() - t0)
 
 
+class ProbeResult(NamedTuple):
+    """A kinematic probe of the path at a state at rest (``path_probe``)."""
+    key: str                  # the state probed (the staircase journal's key)
+    c_state: float            # c of the state as given [Pa]
+    c_before: float           # c at rest at the state's strain (relaxed at fixed strain) [Pa]
+    c_after: float            # c at rest after the move along the path [Pa]
+    eps1_before: float        # [-]
+    d_eps1: float             # the axial strain of the move, from the walls [-]
+    k_path: float             # (c_after - c_before) / d_eps1 [Pa]
+    w2: float                 # the path's second-order work of the move, dc dU1 W t [J]
+    outcome: str              # the two relaxations': "equilibrium" if both settled
+    steps: int                # time steps: relaxation, move, relaxation
+    wall_time: float          # [s]
+
+
+def path_probe(state: State, ratio: float, opts: BurstOptions = BurstOptions(), threads=None,
+               key: str = "") -> ProbeResult:
+    """The second-order work of the path's own direction at a state at rest, measured without a
+    burst (``shared/spec/burst.md``, "What the DEM's burst proves"): ``state`` relaxed at fixed
+    strain (``relax``: c_before, the c it keeps at rest; its change from the state's c is a
+    sample of the noise of c at rest), the tied walls then moved along the path, d eps2 = R
+    d eps1, by ``opts.probe_d_eps1`` at the axial rate ``opts.probe_rate`` (strain control:
+    always controllable, whatever the sign of the answer), and relaxed again at fixed strain
+    (c_after). The static stiffness of the path is k_path = dc / d eps1 [Pa], dc = c_after -
+    c_before, d eps1 the walls' own; along the path W2 = d eps1 (d s1 + R d s2) = dc d eps1 per
+    unit volume, so its sign is k_path's, and the probe's W2 = dc dU1 W t [J] (U1 = H0 eps1).
+    The rate and the size of the move are a rule (docs/burst.md: slow enough that k_path no
+    longer moves with the rate, small against the strain of the staircase's steps, large
+    against the noise of c at rest)."""
+    t0 = time.time()
+    s2, s1 = Simulation(state).wall_stress()
+    c_state = s1 + ratio * s2
+    before = relax(state, ratio, opts, threads)
+    sim = Simulation(before.state)
+    if threads is not None:
+        sim.threads = ThreadChooser(sim.n, threads)
+    e0 = sim.strain()[1]
+    sim.set_control(strain_rate(ratio * opts.probe_rate, opts.probe_rate, sim.ref_len))
+    moves = max(1, int(round(opts.probe_d_eps1 / (opts.probe_rate * sim.dt))))
+    sim.run(moves)
+    after = relax(sim.state(), ratio, opts, threads)
+    e1 = Simulation(after.state).strain()[1]
+    d = e1 - e0
+    dc = after.c_rest - before.c_rest
+    w = float(Simulation(after.state).size[0])
+    outcome = ("equilibrium" if before.outcome == after.outcome == "equilibrium"
+               else f"{before.outcome}/{after.outcome}")
+    return ProbeResult(key, c_state, before.c_rest, after.c_rest, e0, d, dc / d,
+                       dc * d * sim.ref_len[1] * w * sim.params.thickness, outcome,
+                       before.steps + moves + after.steps, time.time() - t0)
+
+
+def k_noise(probes, d_eps1) -> float:
+    """The noise of k_path [Pa] from the probes of one path: sqrt(2) times the RMS change of c
+    that relaxing an equilibrium at fixed strain makes (c_before - c_state, the states held
+    under the dead load: the relaxed states of the path are at rest at fixed strain already),
+    over d_eps1: c_before and c_after each carry that noise. NaN without such probes."""
+    dz = [p.c_before - p.c_state for p in probes if p.key.startswith("h")]
+    if not dz:
+        return math.nan
+    return math.sqrt(2.0) * math.sqrt(float(np.mean(np.square(dz)))) / d_eps1
+
+
+CLEARLY = 2.0      # k_path is clearly positive above this many times its noise
+
+
+def theory_verdict(eqs, fails, noise, dc) -> dict:
+    """The theory's verdict on one path's staircase (``shared/spec/burst.md``): at a state at
+    rest, W2 of the path (the sign of k_path) vanishes where a held G can no longer be kept.
+
+    ``eqs``: the staircase's equilibria in order, [(key, c [Pa], eps1, k_path [Pa])], the relaxed
+    start first; ``fails``: its failing holds, [(key of the equilibrium it started from, step
+    [Pa])]; ``noise``: k_path's noise [Pa] (``k_noise``); ``dc``: the smallest step [Pa].
+
+    k_path is *clearly positive* above ``CLEARLY`` times its noise. The crossing: the zero of
+    k_path, interpolated linearly in c between the last equilibrium where k_path is clearly
+    positive and the next (the band: where k_path = +-CLEARLY noise there; an equilibrium past
+    it whose k_path is positive but within the noise does not move it: at 4000 disks one such,
+    +1.8e6 Pa against a noise of 4.1e6 Pa, lies between two of -1.6e7 and -5.6e8 Pa); the
+    overshoot: how far past it, in c and in eps1, the dead load still held (the c peak at rest,
+    the last equilibrium). The verdict:
+    "passes" when no hold of +dc failed from an equilibrium where k_path is clearly positive
+    and k_path is not clearly positive at the last equilibrium; "contradicted" when a hold of +dc
+    failed from an equilibrium where k_path is clearly positive; "no verdict" without a failing
+    hold of +dc or without k_path (probes off or undecided). A failing hold of a larger step
+    from a clearly positive k_path is reported (``finite_step_failures``), not counted against
+    the theory: it speaks of an infinitesimal dG (the dead load's finite step also overshoots
+    its static displacement dynamically)."""
+    nan = math.nan
+    k = np.array([e[3] for e in eqs], float)
+    c = np.array([e[1] for e in eqs], float)
+    e1 = np.array([e[2] for e in eqs], float)
+    out = {"k_path_first": float(k[0]) if len(k) else nan,
+           "k_path_last": float(k[-1]) if len(k) else nan,
+           "k_path_ratio": float(k[-1] / k[0]) if len(k) and k[0] != 0 else nan,
+           "k_noise": noise, "c_cross": nan, "c_cross_band": [nan, nan], "eps1_cross": nan,
+           "overshoot_c": nan, "overshoot_eps1": nan, "finite_step_failures": 0,
+           "c_peak_rest": float(c[-1]) if len(c) else nan,
+           "verdict": "no verdict", "why": ""}
+    if not len(k) or not np.all(np.isfinite(k)) or not math.isfinite(noise):
+        out["why"] = "no k_path at every equilibrium"
+        return out
+    pos = k > CLEARLY * noise
+    kk = {e[0]: (kv, p) for e, kv, p in zip(eqs, k, pos)}
+    dc_fails = [f for f in fails if f[1] <= dc * (1 + 1e-9)]
+    against = [f for f in dc_fails if kk.get(f[0], (nan, False))[1]]
+    out["finite_step_failures"] = sum(1 for f in fails if f[1] > dc * (1 + 1e-9)
+                                      and kk.get(f[0], (nan, False))[1])
+    # the crossing: after the last equilibrium with k_path clearly positive (if one follows)
+    above = np.flatnonzero(pos)
+    if len(above) and above[-1] < len(k) - 1:
+        a = int(above[-1])
+
+        def zero(level):
+            return float(np.interp(level, [k[a + 1], k[a]], [c[a + 1], c[a]])), \
+                float(np.interp(level, [k[a + 1], k[a]], [e1[a + 1], e1[a]]))
+
+        out["c_cross"], out["eps1_cross"] = zero(0.0)
+        out["c_cross_band"] = sorted([zero(CLEARLY * noise)[0], zero(-CLEARLY * noise)[0]])
+        out["overshoot_c"] = float(c[-1] - out["c_cross"])
+        out["overshoot_eps1"] = float(e1[-1] - out["eps1_cross"])
+    elif not len(above):
+        out["why"] = "k_path not clearly positive already at the first equilibrium"
+    if against:
+        out["verdict"] = "contradicted"
+        out["why"] = (f"a hold of +{dc:g} Pa failed from an equilibrium where k_path is clearly "
+                      f"positive ({kk[against[0][0]][0]:.3g} Pa, noise {noise:.2g} Pa)")
+    elif not dc_fails:
+        out["why"] = "no hold of +dc failed"
+    elif pos[-1]:
+        out["verdict"] = "contradicted"
+        out["why"] = f"k_path is clearly positive at the last equilibrium ({k[-1]:.3g} Pa)"
+    else:
+        out["verdict"] = "passes"
+        out["why"] = (f"k_path {k[0]:.3g} Pa at the first equilibrium, {k[-1]:.3g} Pa at the "
+                      f"last (noise {noise:.2g} Pa): the holds of +{dc:g} Pa failed where W2 of "
+                      "the path is <= 0 within noise")
+    return out
+
+
 class StairResult(NamedTuple):
     """The rest search of one path (``staircase``)."""
     relaxed: dict             # "start" and "peak" (the loaded peak's or the end's) -> RelaxResult
-    holds: list               # [(role, c_from, c_target, HoldResult)]: the staircase's, then
-                              # the below run ("below"); the past run is the last failing one
+    holds: list               # [(role, c_from, c_target, HoldResult)]: the staircase's
+                              # ("stair"), the below run ("below"), then each switch's state
+                              # held with no change of load ("baseline_below", "baseline_past");
+                              # the past run is the last failing stair hold
     c_peak: float             # the largest c at rest held at equilibrium (nan: none)
     eps1_peak: float          # its axial strain
     eta_peak: float
     switches: dict            # "below"/"past" -> index into holds
     end: str                  # how the search ended: "past found", "no loaded peak", ...
     wall_time: float
+    starts: list = []         # the journal key of the state each hold started from
+    probes: dict = {}         # journal key of an equilibrium -> ProbeResult (path_probe)
+    verdict: dict = {}        # theory_verdict's, with the probes' rule
+    baselines: dict = {}      # "below"/"past" -> index into holds of its baseline run
 
 
 def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(), threads=None,
@@ -352,11 +521,14 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
     s2 follows G through the box's shape, c W t = G + R F2 (W/H - W0/H0), and a hold that creeps
     may end at a c below its start: the c peak at rest is the c of the equilibrium under the
     largest G.) ``below``: from the first equilibrium of the staircase whose c reaches
-    c_rest + below_rise (c_peak_rest - c_rest), held at its c + dc. The loaded peak's state is
-    relaxed too: its c at rest and its drop from the loaded c are recorded. A path without a
-    loaded peak gets one below run from its end, relaxed. ``journal``: a ``_Journal`` that
-    records every relaxation and hold as it finishes (and gives them back on a resume)."""
-    from . import io
+    c_rest + below_rise (c_peak_rest - c_rest), held at its c + dc. Each switch's start state is
+    also held with no change of load (its ``baseline`` run: the noise of the anatomy's counts).
+    The loaded peak's state is relaxed too: its c at rest and its drop from the loaded c are
+    recorded. A path without a loaded peak gets one below run from its end, relaxed. With
+    ``opts.probes``, every equilibrium (the relaxed states, the end of every hold that settled)
+    is probed along the path (``path_probe``: k_path) and the theory's verdict is drawn
+    (``theory_verdict``). ``journal``: a ``_Journal`` that records every relaxation, hold and
+    probe as it finishes (and gives them back on a resume)."""
     t0 = time.time()
     log = log or (lambda m: None)
     journal = journal or _Journal(None)
@@ -370,7 +542,7 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
             log(f"{name} state relaxed at fixed strain: c {res.c_loaded / 1e3:.2f} -> "
                 f"{res.c_rest / 1e3:.2f} kPa, {res.outcome} after {res.steps} steps")
         relaxed[name] = res
-    holds = []
+    holds, starts = [], []
     eq = [("relaxed_start", relaxed["start"].c_rest, path.rows[path.grid[0][0], 1])]  # equilibria
 
     def held(role, key, c_from, target):
@@ -378,53 +550,86 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
         got = journal.hold(k)
         if got is None:
             got = hold(journal.state(key), ratio, target, opts, threads)
-            journal.keep(f"h{k}_end", got.end_state)       # the next start, or a figure's
-            journal.keep(f"h{k}_onset", got.onset_state)
-            journal.add_hold(k, role, c_from, target, got)
+            for when in ("end", "onset", "onset_prev", "end_prev"):   # the next start, figures
+                journal.keep(f"h{k}_{when}", getattr(got, f"{when}_state"))
+            journal.add_hold(k, role, c_from, target, got, key)
             log(f"{role} hold {k}: c {c_from / 1e3:.3f} -> {target / 1e3:.3f} kPa: "
                 f"{got.outcome} after {got.steps} steps")
-        holds.append((role, c_from, target, got._replace(end_state=None, onset_state=None)))
+        holds.append((role, c_from, target, got._replace(end_state=None, onset_state=None,
+                                                         onset_prev_state=None,
+                                                         end_prev_state=None)))
+        starts.append(key)
         return got
 
+    switches, baselines = {}, {}
+    c_peak = e_peak = eta_peak = math.nan
     if path.peak is None:                           # no loaded peak: below from the path's end
         held("below", "relaxed_peak", relaxed["peak"].c_rest, relaxed["peak"].c_rest + dc)
-        return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds,
-                           math.nan, math.nan, math.nan, {"below": 0}, "no loaded peak",
-                           time.time() - t0)
-    c_s = relaxed["start"].c_rest
-    key = "relaxed_start"
-    step = max((path.rows[path.peak, 8] - c_s) / opts.stairs, dc)
-    end = ""
-    while len(holds) < opts.max_holds:
-        h = held("stair", key, c_s, c_s + step)
-        if h.outcome == "equilibrium":
-            key = f"h{len(holds) - 1}_end"
-            c_s = h.history[-1, 4]
-            eq.append((key, c_s, h.history[-1, 2]))
-            continue
-        if h.outcome == "undecided":
-            end = "a hold undecided at --max-steps"
-            break
-        if step <= dc:
-            end = "past found"
-            break
-        step = max(0.5 * step, dc)
+        switches["below"] = 0
+        end = "no loaded peak"
     else:
-        end = f"no failure within {opts.max_holds} holds"
-    switches = {}
-    c_peak, e_peak = eq[-1][1], eq[-1][2]
-    eta_peak = math.nan
-    if end == "past found":
-        switches["past"] = len(holds) - 1
-        thr = eq[0][1] + opts.below_rise * (c_peak - eq[0][1])
-        kb, cb, _ = next(x for x in eq if x[1] >= thr) if len(eq) > 1 else eq[0]
-        held("below", kb, cb, cb + dc)
-        switches["below"] = len(holds) - 1
-        hp = holds[switches["past"]][3].history
-        eta_peak = (hp[0, 10] - hp[0, 11]) / (0.5 * (hp[0, 10] + hp[0, 11]))
+        c_s = relaxed["start"].c_rest
+        key = "relaxed_start"
+        step = max((path.rows[path.peak, 8] - c_s) / opts.stairs, dc)
+        end = ""
+        while len(holds) < opts.max_holds:
+            h = held("stair", key, c_s, c_s + step)
+            if h.outcome == "equilibrium":
+                key = f"h{len(holds) - 1}_end"
+                c_s = h.history[-1, 4]
+                eq.append((key, c_s, h.history[-1, 2]))
+                continue
+            if h.outcome == "undecided":
+                end = "a hold undecided at --max-steps"
+                break
+            if step <= dc:
+                end = "past found"
+                break
+            step = max(0.5 * step, dc)
+        else:
+            end = f"no failure within {opts.max_holds} holds"
+        c_peak, e_peak = eq[-1][1], eq[-1][2]
+        if end == "past found":
+            switches["past"] = len(holds) - 1
+            thr = eq[0][1] + opts.below_rise * (c_peak - eq[0][1])
+            kb, cb, _ = next(x for x in eq if x[1] >= thr) if len(eq) > 1 else eq[0]
+            held("below", kb, cb, cb + dc)
+            switches["below"] = len(holds) - 1
+            hp = holds[switches["past"]][3].history
+            eta_peak = (hp[0, 10] - hp[0, 11]) / (0.5 * (hp[0, 10] + hp[0, 11]))
+    # each switch's start held with no change of load: the anatomy's noise
+    for sw in SWITCHES:
+        if sw in switches:
+            i = switches[sw]
+            held(f"baseline_{sw}", starts[i], holds[i][1], holds[i][1])
+            baselines[sw] = len(holds) - 1
     log(f"rest search: {end}; c peak at rest {c_peak / 1e3:.3f} kPa, {len(holds)} holds")
+    probes, verdict = {}, {}
+    if opts.probes:
+        keys = ([k for k, _, _ in eq] + ["relaxed_peak"]
+                + [f"h{k}_end" for k, (ro, _, _, h) in enumerate(holds)
+                   if ro != "stair" and h.outcome == "equilibrium"])
+        for key in keys:
+            pr = journal.probe(key)
+            if pr is None:
+                pr = path_probe(journal.state(key), ratio, opts, threads, key)
+                journal.add_probe(pr)
+                log(f"probe at {key}: c {pr.c_before / 1e3:.3f} kPa, k_path {pr.k_path:.3g} Pa "
+                    f"(dc {pr.c_after - pr.c_before:+.1f} Pa over d eps1 {pr.d_eps1:.3g}), "
+                    f"{pr.outcome}")
+            probes[key] = pr
+        noise = k_noise(list(probes.values()), opts.probe_d_eps1)
+        eqk = [(k, c, e, probes[k].k_path if probes[k].outcome == "equilibrium" else math.nan)
+               for k, c, e in eq]
+        fails = [(starts[i], ct - cf) for i, (ro, cf, ct, h) in enumerate(holds)
+                 if ro == "stair" and h.outcome == "failure"]
+        verdict = theory_verdict(eqk, fails, noise, dc) if end == "past found" else \
+            {**theory_verdict(eqk, [], noise, dc), "why": f"the rest search ended: {end}"}
+        verdict.update(probe_d_eps1=opts.probe_d_eps1, probe_rate=opts.probe_rate)
+        log(f"theory: {verdict['verdict']} ({verdict['why']})")
     return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds, c_peak,
-                       e_peak, eta_peak, switches, end, time.time() - t0)
+                       e_peak, eta_peak, switches, end, time.time() - t0, starts, probes,
+                       verdict, baselines)
 
 
 class _Journal:
@@ -482,8 +687,18 @@ class _Journal:
                                   r["g_held"], r["wall_mass"], None, None, r["onset_step"])
         return None
 
-    def add_hold(self, k, role, c_from, target, h):
+    def probe(self, key):
+        for r in self.records:
+            if r["kind"] == "probe" and r["key"] == key:
+                return ProbeResult(**{f: r[f] for f in ProbeResult._fields})
+        return None
+
+    def add_probe(self, p: ProbeResult):
+        self._add({"kind": "probe", **p._asdict()})
+
+    def add_hold(self, k, role, c_from, target, h, start):
         self._add({"kind": "hold", "k": k, "role": role, "c_from": c_from, "c_target": target,
+                   "from": start,
                    "outcome": h.outcome, "steps": h.steps, "history": h.history.tolist(),
                    "creep_rate": h.creep_rate, "wall_time": h.wall_time, "hold": h.hold,
                    "ke_switch": h.ke_switch, "g_held": h.g_held, "wall_mass": h.wall_mass,
@@ -532,56 +747,8 @@ class HoldResult(NamedTuple):
     onset_state: State | None = None  # the state at the onset of a burst (backbone E_c 10 x its
                                       # floor, ``ONSET``), None if it never came
     onset_step: int = -1              # its step since the switch
-
-
-class ContactTable(NamedTuple):
-    """The contacts of a configuration: sorted keys (K,), grain contacts i (N + 4) + j and wall
-    contacts p (N + 4) + N + wall, with the force (K, 2) on the first disk [N]; and the
-    positions (N, 2) and walls (4,) [m] that give every branch."""
-    keys: np.ndarray
-    force: np.ndarray
-    x: np.ndarray
-    walls: np.ndarray
-
-
-def contact_table(sim) -> ContactTable:
-    """The contacts of ``sim`` now (copies)."""
-    snap = sim.snapshot()
-    n = sim.n
-    fw = np.zeros((len(snap.ww), 2))
-    fw[np.arange(len(snap.ww)), snap.ww // 2] = np.where(snap.ww % 2 == 0, 1.0, -1.0) * snap.wf
-    keys = np.concatenate([snap.ci * (n + 4) + snap.cj, snap.wp * (n + 4) + n + snap.ww])
-    force = np.concatenate([np.column_stack([snap.fx, snap.fy]), fw])
-    order = np.argsort(keys, kind="stable")
-    return ContactTable(keys[order], force[order], sim.x.copy(), sim.walls.copy())
-
-
-def _branches(keys, x, walls):
-    """Branch (K, 2) of each key [m]: x_j - x_i, or from the disk to its wall along the wall's
-    axis."""
-    n = len(x)
-    i, j = keys // (n + 4), keys % (n + 4)
-    out = np.zeros((len(keys), 2))
-    g = j < n
-    out[g] = x[j[g]] - x[i[g]]
-    w = ~g
-    wl = j[w] - n
-    out[np.flatnonzero(w), wl // 2] = walls[wl] - x[i[w], wl // 2]
-    return out
-
-
-def contact_work(t0: ContactTable, t1: ContactTable) -> float:
-    """sum_c df . dl [J] between two configurations (paper Eq. 15, secant) over the grain and
-    wall contacts at either end; a contact missing at one end has f = 0 there, its branch is
-    the one the disks' positions give. By Eq. 14 it equals the walls' secant second-order work
-    less sum_p dF_p . dx_p (the unbalanced forces')."""
-    keys = np.union1d(t0.keys, t1.keys)
-    f0 = np.zeros((len(keys), 2))
-    f1 = np.zeros((len(keys), 2))
-    f0[np.searchsorted(keys, t0.keys)] = t0.force
-    f1[np.searchsorted(keys, t1.keys)] = t1.force
-    dl = _branches(keys, t1.x, t1.walls) - _branches(keys, t0.x, t0.walls)
-    return float(np.sum((f1 - f0) * dl))
+    onset_prev_state: State | None = None   # the states UNSTABLE_WINDOW checks before the onset
+    end_prev_state: State | None = None     # and before the end (the anatomy's last increment)
 
 
 def wall_work(sim, g0, walls0) -> float:
@@ -651,6 +818,7 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
     Ledger(sim)
     hist = []
     onset = []
+    recent = deque([sim.state()], maxlen=UNSTABLE_WINDOW + 1)   # the increment's start states
     # settle's row: the rule's columns, the ledger's, the anatomy's; this history has its own
     # "ke" and takes the anatomy's secant W2_int in its "w2_int_secant"
     col = {c: k for k, c in enumerate(SETTLE_COLUMNS)}
@@ -665,8 +833,10 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
         # the onset of a burst: the backbone's kinetic energy 10 times its floor, the level the
         # held step's first response leaves one check after the switch (from rest, that step
         # alone raises it 1e2-1e5 times, below as past, and decays below)
+        now = sim.state()
+        recent.append(now)                # recent[0]: UNSTABLE_WINDOW checks back (or the switch)
         if len(hist) > 2 and not onset and keb >= ONSET * max(hist[1][8], 1e-300):
-            onset.append((step - step0, sim.state()))
+            onset.append((step - step0, now, recent[0]))
         if progress:
             progress(steps, hist[-1])
 
@@ -676,14 +846,34 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
     # E_c at the switch: the backbone's (disks with two contacts or more), as ke_growth's
     return HoldResult(res.outcome, res.steps, np.asarray(hist, float), res.creep_rate,
                       time.time() - t0, opts.hold, hist[0][8], g_held, m_g, sim.state(),
-                      onset[0][1] if onset else None, onset[0][0] if onset else -1)
+                      onset[0][1] if onset else None, onset[0][0] if onset else -1,
+                      onset[0][2] if onset else None, recent[0])
 
 
 def ke_growth(keb) -> float:
-    """Largest backbone kinetic energy over the one at the switch (the first check: the sample
-    still moves at the path's rate there), the ``ke_growth`` column."""
+    """Largest backbone kinetic energy over the one at the switch, where the sample is at rest
+    (the ``ke_growth`` column): a ratio to the kinetic-energy floor of the start, which depends on
+    how well the start had settled and on the sample's size, so it tells neither settling from
+    bursting nor one size from another (a settling run read x2e5 at 2000 disks, x27 at 300):
+    the growth measures are ``growth`` (the energy release against the work of the held step,
+    and the kinetic energy at the end against the equilibrium bound)."""
     keb = np.asarray(keb, float)
     return float(keb.max() / keb[0]) if keb[0] > 0 else math.inf
+
+
+def growth(history, n_disks, ke_tol) -> dict:
+    """The growth of a held run's backbone kinetic energy measured against what the held step
+    put in (``hmodel.burst_rule.energy_release``, the one measure of the three parts: E_c
+    gained since the switch over W2_ext = dG dU1, its largest value ``ke_w2ext_max``, the time
+    ``t_release`` [s] it first passes ``RELEASE``, ``released``) and against the equilibrium
+    bound: ``ke_end_over_bound``, the backbone E_c at the end over ke_tol x disks. Neither depends
+    on the kinetic-energy floor of the start. ``history``: a hold's (HISTORY_COLUMNS from
+    "step")."""
+    from hmodel.burst_rule import energy_release
+    h = np.asarray(history, float)
+    r = energy_release(h[:, 1], h[:, 8], h[:, H["w2_ext_held"]])
+    return {"ke_w2ext_max": r["ratio_max"], "t_release": r["t_release"],
+            "released": int(r["released"]), "ke_end_over_bound": float(h[-1, 8] / (ke_tol * n_disks))}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -873,9 +1063,20 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
                           "rest_search": stairs[(r, f)].end if (r, f) in stairs else None,
                           "holds": len(stairs[(r, f)].holds) if (r, f) in stairs else 0,
                           "rest_search_wall_time": stairs[(r, f)].wall_time
-                          if (r, f) in stairs else None} for r, f, _ in combos],
+                          if (r, f) in stairs else None,
+                          # the kinematic probes and the theory's verdict (``theory_verdict``)
+                          "theory": stairs[(r, f)].verdict if (r, f) in stairs else {},
+                          "k_path": [{"key": p.key, "c": p.c_before, "eps1": p.eps1_before,
+                                      "k_path": p.k_path, "outcome": p.outcome}
+                                     for p in stairs[(r, f)].probes.values()]
+                          if (r, f) in stairs else []} for r, f, _ in combos],
                "runs": [{k: row[k] for k in ("ratio", "start_fraction", "switch", "outcome",
-                                             "steps", "ke_growth")} for row in rows],
+                                             "steps", "ke_w2ext_max", "t_release", "released",
+                                             "ke_end_over_bound", "k_path_switch",
+                                             "n_unstable_max", "unstable_noise_max",
+                                             "n_unstable_excess")} for row in rows],
+               "growth_rule": {"release": RELEASE, "measure": "(E_c - E_c(0)) / W2_ext of the "
+                               "held step, backbone E_c (hmodel.burst_rule.energy_release)"},
                "wall_time": time.time() - t0}
     write_burst_files(out_dir, combos, paths, stairs, rows, summary)
     # the states the switches started from stay (rest/R.._f.._switch.npz); the rest served the
@@ -888,7 +1089,7 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
         keep = {}
         if (r, f) in stairs:
             res = stairs[(r, f)]
-            keep = {sw: j.state(_switch_key(res, i)) for sw, i in res.switches.items()}
+            keep = {sw: j.state(res.starts[i]) for sw, i in res.switches.items()}
             # the anatomy at the onset of a burst (if it came) and at the end of every switch's
             # run: VTU for ParaView, and the first path's figure, below beside past
             for sw in SWITCHES:
@@ -899,12 +1100,18 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
                 for when in ("onset", "end"):
                     if j.has(f"h{i}_{when}"):
                         sim = Simulation(j.state(f"h{i}_{when}"))
+                        sp = (contact_state(Simulation(j.state(f"h{i}_{when}_prev")))
+                              if j.has(f"h{i}_{when}_prev") else None)
                         write_anatomy_vtk(os.path.join(out_dir, "anatomy"),
-                                          f"{_base(r, f)}_{sw}_{when}", sim, s0)
+                                          f"{_base(r, f)}_{sw}_{when}", sim, s0, sp)
                         if (r, f) == (combos[0][0], combos[0][1]):
                             t = (sim.step - keep[sw].step) * sim.dt
+                            row = next(x for x in rows if x["switch"] == sw and
+                                       (x["ratio"], x["start_fraction"]) == (r, f))
                             panels.append((f"{sw}: {res.holds[i][3].outcome}, at the {when} "
-                                           f"(t = {t:.3g} s)", sim, s0))
+                                           f"(t = {t:.3g} s); baseline (no change of load): "
+                                           f"at most {row['unstable_noise_max']:.0f} unstable",
+                                           sim, s0, sp))
         for path in j.files() + [os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz")
                                  for i in range(2)]:
             if os.path.exists(path):
@@ -918,20 +1125,6 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
 
 def _base(ratio, fraction):
     return f"R{ratio:g}_f{fraction:g}"
-
-
-def _switch_key(res: StairResult, i):
-    """The journal's key of the state hold ``i`` of a staircase started from: the relaxed start,
-    the relaxed end of a path without a peak, or the end of the last equilibrium hold before it
-    (for the below run: the equilibrium it was chosen from)."""
-    role, c_from, _, _ = res.holds[i]
-    if res.end == "no loaded peak":
-        return "relaxed_peak"
-    eq = [(f"h{k}_end", h.history[-1, 4]) for k, (ro, _, _, h) in enumerate(res.holds)
-          if ro == "stair" and h.outcome == "equilibrium" and k < i]
-    keys = ["relaxed_start"] + [k for k, _ in eq]
-    cs = [res.relaxed["start"].c_rest] + [c for _, c in eq]
-    return keys[int(np.argmin(np.abs(np.asarray(cs) - c_from)))]
 
 
 def burst_row(ratio, fraction, switch, path: PathResult, res: StairResult, i, opts, eta_peak, n):
@@ -964,24 +1157,75 @@ def burst_row(ratio, fraction, switch, path: PathResult, res: StairResult, i, op
             "path_steps": path.steps, "n_disks": n,
             "w2_ext_held_end": h[-1, H["w2_ext_held"]],
             "w2_int_secant_end": h[-1, H["w2_int_secant"]], "w_damp_end": h[-1, H["w_damp"]],
-            "u0_end": h[-1, H["u0"]], "eq1_residual": float(np.max(h[:, H["eq1_residual"]])),
+            "u0_end": h[-1, H["u0"]], "eq1_bookkeeping": float(np.max(h[:, H["eq1_bookkeeping"]])),
             "ke_switch": run.ke_switch, "c_rest": h[0, 4], "c_loaded": c_loaded,
             "hold": run.hold, "c_peak_loaded": pr[lpk, 8] if lpk is not None else nan,
             "eta_peak_loaded": pr[lpk, 7] if lpk is not None else nan,
             "wall_mass": run.wall_mass, "g_held": run.g_held,
-            "holds": len(res.holds), "rest_search": res.end}
+            "holds": len(res.holds), "rest_search": res.end,
+            **growth(h, n, opts.ke_tol),
+            "k_path_switch": _k(res, res.starts[i]), "k_noise": res.verdict.get("k_noise", nan),
+            "c_cross": res.verdict.get("c_cross", nan),
+            "overshoot_c": res.verdict.get("overshoot_c", nan),
+            "overshoot_eps1": res.verdict.get("overshoot_eps1", nan),
+            "verdict": res.verdict.get("verdict", "no probes"),
+            **_anatomy_figures(run, res.holds[res.baselines[switch]][3]
+                               if switch in res.baselines else None)}
+
+
+def _k(res: StairResult, key):
+    """k_path of the state ``key`` [Pa] (NaN if not probed or its probe did not settle)."""
+    p = res.probes.get(key)
+    return p.k_path if p is not None and p.outcome == "equilibrium" else math.nan
+
+
+def _anatomy_figures(run: HoldResult, base: HoldResult | None) -> dict:
+    """The anatomy of a switch's run against its baseline run (``staircase``: the switch's
+    start held with no change of load, the same window and threshold): the largest count of
+    unstable contacts over the run (below -UNSTABLE_TAU x the energy scale, ``dem.anatomy``),
+    the baseline's mean and largest, the excess of the first over the baseline's largest; the
+    largest cluster of each; the raw counts (threshold 0) of both; at the burst's onset
+    (``ONSET``) the time, the count, the largest cluster and the sliding share."""
+    h = run.history
+    nan = math.nan
+    out = {"n_unstable_max": float(np.max(h[:, H["n_unstable"]])),
+           "largest_cluster_max": float(np.max(h[:, H["largest_cluster"]])),
+           "sliding_share_switch": float(h[0, H["sliding_share"]])}
+    b = base.history if base is not None else None
+    out["unstable_noise_mean"] = float(np.mean(b[1:, H["n_unstable"]])) if b is not None and len(b) > 1 else nan
+    out["unstable_noise_max"] = float(np.max(b[1:, H["n_unstable"]])) if b is not None and len(b) > 1 else nan
+    out["largest_cluster_noise_max"] = (float(np.max(b[1:, H["largest_cluster"]]))
+                                        if b is not None and len(b) > 1 else nan)
+    out["n_unstable_excess"] = out["n_unstable_max"] - out["unstable_noise_max"]
+    out["n_unstable_raw_max"] = float(np.max(h[:, H["n_unstable_raw"]]))
+    out["unstable_raw_noise_max"] = (float(np.max(b[1:, H["n_unstable_raw"]]))
+                                     if b is not None and len(b) > 1 else nan)
+    k = np.flatnonzero(h[:, 0] == run.onset_step) if run.onset_step >= 0 else []
+    if len(k):
+        r = h[k[0]]
+        out.update(t_onset=r[1], n_unstable_onset=r[H["n_unstable"]],
+                   largest_cluster_onset=r[H["largest_cluster"]],
+                   sliding_share_onset=r[H["sliding_share"]])
+    else:
+        out.update(t_onset=nan, n_unstable_onset=nan, largest_cluster_onset=nan,
+                   sliding_share_onset=nan)
+    return out
 
 
 def write_burst_files(out_dir, combos, paths, stairs, rows, summary):
-    """burst.csv, history.csv (the below and past runs), paths.csv, rest.csv (the relaxations),
-    stairs.csv (every hold of every staircase), summary.json and the figures."""
+    """burst.csv, history.csv (the below and past runs and their baselines), paths.csv, rest.csv
+    (the relaxations), stairs.csv (every hold of every staircase), probes.csv (every kinematic
+    probe), summary.json and the figures."""
     from . import io
     io.write_csv(os.path.join(out_dir, "burst.csv"), BURST_COLUMNS,
                  [[r[c] for c in BURST_COLUMNS] for r in rows])
     runs = {(r, f, sw): stairs[(r, f)].holds[i][3] for (r, f), res in stairs.items()
             for sw, i in res.switches.items()}
+    bases = {(r, f, f"baseline_{sw}"): stairs[(r, f)].holds[i][3] for (r, f), res in stairs.items()
+             for sw, i in res.baselines.items()}
     io.write_csv(os.path.join(out_dir, "history.csv"), HISTORY_COLUMNS,
-                 [[r, f, sw] + list(h) for (r, f, sw), run in runs.items() for h in run.history])
+                 [[r, f, sw] + list(h) for (r, f, sw), run in {**runs, **bases}.items()
+                  for h in run.history])
     io.write_csv(os.path.join(out_dir, "paths.csv"), PATH_COLUMNS,
                  [[r, f] + list(x) for r, f, _ in combos for x in paths[(r, f)].rows])
     rest = []
@@ -990,13 +1234,25 @@ def write_burst_files(out_dir, combos, paths, stairs, rows, summary):
             row = paths[(r, f)].grid[0 if name == "start" else 1][0]
             rest.append([r, f, name, paths[(r, f)].rows[row, 1], x.c_loaded, x.c_rest,
                          x.c_loaded - x.c_rest, x.eta_rest, x.outcome, x.steps, x.ke_end,
-                         x.unbalanced_end])
+                         x.unbalanced_end, _k(res, "relaxed_" + name)])
     io.write_csv(os.path.join(out_dir, "rest.csv"), REST_COLUMNS, rest)
-    io.write_csv(os.path.join(out_dir, "stairs.csv"), STAIR_COLUMNS,
-                 [[r, f, k, role, a, b, b - a, h.outcome, h.steps, h.history[0, 2],
-                   h.history[-1, 2], h.history[-1, 4], h.ke_switch, float(h.history[:, 8].max()),
-                   h.history[-1, H["w2_int"]], float(np.max(h.history[:, H["eq1_residual"]]))]
-                  for (r, f), res in stairs.items() for k, (role, a, b, h) in enumerate(res.holds)])
+    n = summary["n_disks"]
+    tol = summary["options"]["ke_tol"]
+    stair_rows = []
+    for (r, f), res in stairs.items():
+        for k, (role, a, b, h) in enumerate(res.holds):
+            g = growth(h.history, n, tol)
+            stair_rows.append([r, f, k, role, a, b, b - a, h.outcome, h.steps, h.history[0, 2],
+                               h.history[-1, 2], h.history[-1, 4], h.ke_switch,
+                               float(h.history[:, 8].max()), h.history[-1, H["w2_int"]],
+                               float(np.max(h.history[:, H["eq1_bookkeeping"]])), res.starts[k],
+                               _k(res, res.starts[k]),
+                               _k(res, f"h{k}_end") if h.outcome == "equilibrium" else math.nan,
+                               g["ke_w2ext_max"], g["ke_end_over_bound"]])
+    io.write_csv(os.path.join(out_dir, "stairs.csv"), STAIR_COLUMNS, stair_rows)
+    io.write_csv(os.path.join(out_dir, "probes.csv"), PROBE_COLUMNS,
+                 [[r, f] + [getattr(p, c) for c in PROBE_COLUMNS[2:]]
+                  for (r, f), res in stairs.items() for p in res.probes.values()])
     io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     plot_burst(out_dir, combos, paths, stairs, runs, summary)
@@ -1078,35 +1334,116 @@ def plot_burst(out_dir, combos, paths, stairs, runs, summary):
     ax.legend(fontsize=7, loc="best")
     save_figure(fig, os.path.join(out_dir, "fig_burst_c.png"), dpi=120)
 
-    for name, ylabel, title in (
-            ("fig_burst_ke.png", "backbone kinetic energy [J]",
-             "kinetic energy of the disks with two contacts or more after the switch"),
-            ("fig_burst_strain.png", r"strain since the switch $|\Delta\varepsilon|$ [%]",
-             r"axial (solid) and lateral (dotted) strain since the switch")):
-        fig, ax = plt.subplots(figsize=(8, 4.8), constrained_layout=True)
-        for (r, f, sw), run in runs.items():
-            h = run.history
-            oc = run.outcome
-            lab = f"R = {r:g}, f = {f:g}, {sw}: {oc}"
-            ls = "-" if sw == "below" else "--"
-            if name == "fig_burst_ke.png":
-                ax.loglog(np.maximum(h[:, 1], 0.5 * h[1, 1] if len(h) > 1 else 1e-6),
-                          np.maximum(h[:, 8], 1e-16), ls, color=OUTCOME_COLOR[oc], label=lab)
-            else:
-                ax.semilogy(h[1:, 1], np.abs(h[1:, 2] - h[0, 2]) * 100, ls,
-                            color=OUTCOME_COLOR[oc], label=lab)
-                ax.semilogy(h[1:, 1], np.abs(h[1:, 3] - h[0, 3]) * 100, ":",
-                            color=OUTCOME_COLOR[oc])
-        if name == "fig_burst_ke.png":
-            ax.axhline(summary["options"]["ke_tol"] * n, color="k", ls=":", lw=0.8,
-                       label="equilibrium bound (ke_tol x disks)")
-        ax.set_xlabel("time since the switch [s]")
-        ax.set_ylabel(ylabel)
-        ax.set_title(f"DEM ({n} disks): {title}", fontsize=10)
-        ax.grid(alpha=0.3, which="both")
+    # the kinetic energy, and its release against the held step's work (``growth``)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.8), constrained_layout=True)
+    for (r, f, sw), run in runs.items():
+        h = run.history
+        oc = run.outcome
+        lab = f"R = {r:g}, f = {f:g}, {sw}: {oc}"
+        ls = "-" if sw == "below" else "--"
+        t = np.maximum(h[:, 1], 0.5 * h[1, 1] if len(h) > 1 else 1e-6)
+        ax.loglog(t, np.maximum(h[:, 8], 1e-16), ls, color=OUTCOME_COLOR[oc], label=lab)
+        w = h[:, H["w2_ext_held"]]
+        ratio = np.where(w > 0, (h[:, 8] - h[0, 8]) / np.where(w > 0, w, 1.0), np.nan)
+        bx.semilogx(t, ratio, ls, color=OUTCOME_COLOR[oc], label=lab)
+    ax.axhline(summary["options"]["ke_tol"] * n, color="k", ls=":", lw=0.8,
+               label="equilibrium bound (ke_tol x disks)")
+    bx.axhline(RELEASE, color="k", ls=":", lw=0.8,
+               label=f"release: E_c gained = {RELEASE:g} W2_ext (the sample gave back >= W2_ext)")
+    bx.axhline(1.0, color="0.6", ls="-", lw=0.6)
+    ax.set_ylabel("backbone kinetic energy [J]")
+    bx.set_ylabel(r"$(E_c - E_c(0))\,/\,W_2^{ext}$, $W_2^{ext} = dG\,dU_1$ [-]")
+    bx.set_yscale("symlog", linthresh=1.0)
+    ax.set_title(f"DEM ({n} disks): kinetic energy of the disks with two contacts or more",
+                 fontsize=10)
+    bx.set_title("the kinetic energy gained against the work the held step put in\n"
+                 "(solid: below, dashed: past)", fontsize=10)
+    for x in (ax, bx):
+        x.set_xlabel("time since the switch [s]")
+        x.grid(alpha=0.3, which="both")
         if runs:
-            ax.legend(fontsize=7)
-        else:
-            ax.text(0.5, 0.5, "no switched run (no peak at rest found)", ha="center",
-                    transform=ax.transAxes)
-        save_figure(fig, os.path.join(out_dir, name), dpi=120)
+            x.legend(fontsize=7)
+    if not runs:
+        ax.text(0.5, 0.5, "no switched run (no peak at rest found)", ha="center",
+                transform=ax.transAxes)
+    save_figure(fig, os.path.join(out_dir, "fig_burst_ke.png"), dpi=120)
+
+    fig, ax = plt.subplots(figsize=(8, 4.8), constrained_layout=True)
+    for (r, f, sw), run in runs.items():
+        h = run.history
+        oc = run.outcome
+        ls = "-" if sw == "below" else "--"
+        ax.semilogy(h[1:, 1], np.abs(h[1:, 2] - h[0, 2]) * 100, ls, color=OUTCOME_COLOR[oc],
+                    label=f"R = {r:g}, f = {f:g}, {sw}: {oc}, axial")
+        ax.semilogy(h[1:, 1], np.abs(h[1:, 3] - h[0, 3]) * 100, ":", color=OUTCOME_COLOR[oc],
+                    label=f"R = {r:g}, f = {f:g}, {sw}: lateral")
+    ax.set_xlabel("time since the switch [s]")
+    ax.set_ylabel(r"strain since the switch $|\Delta\varepsilon|$ [%]")
+    ax.set_title(f"DEM ({n} disks): axial strain (solid: below, dashed: past) and lateral "
+                 "strain (dotted) since the switch", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    if runs:
+        ax.legend(fontsize=7)
+    else:
+        ax.text(0.5, 0.5, "no switched run (no peak at rest found)", ha="center",
+                transform=ax.transAxes)
+    save_figure(fig, os.path.join(out_dir, "fig_burst_strain.png"), dpi=120)
+    plot_k_path(os.path.join(out_dir, "fig_burst_k.png"), combos, stairs, n)
+
+
+def plot_k_path(path, combos, stairs, n):
+    """fig_burst_k.png: the kinematic probes of every path (``path_probe``) against the c at
+    rest of the state probed: k_path [Pa] with its noise band (+-CLEARLY k_noise), the staircase's
+    equilibria (filled), the other equilibria probed (open: the relaxed loaded peak, the below
+    run's end, the baselines' ends), the zero crossing and the c peak at rest (the largest c the
+    dead load held), so that the overshoot reads off."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hmodel.io import save_figure
+    fig, ax = plt.subplots(figsize=(8, 5), constrained_layout=True)
+    drawn = False
+    for j, (r, f, _) in enumerate(combos):
+        res = stairs.get((r, f))
+        if res is None or not res.probes:
+            continue
+        col = f"C{j % 10}" if j % 10 not in (2, 3) else f"C{j % 10 + 5}"
+        v = res.verdict
+        stair = ["relaxed_start"] + [f"h{k}_end" for k, (ro, _, _, h) in enumerate(res.holds)
+                                     if ro == "stair" and h.outcome == "equilibrium"]
+        pts = [(res.probes[k].c_before, res.probes[k].k_path) for k in stair if k in res.probes]
+        if pts:
+            c, k = np.array(pts).T
+            ax.plot(c / 1e3, k / 1e6, "o-", color=col, ms=5,
+                    label=f"R = {r:g}, f = {f:g}: the staircase's equilibria ({v.get('verdict')})")
+        other = [p for key, p in res.probes.items() if key not in stair]
+        if other:
+            ax.plot([p.c_before / 1e3 for p in other], [p.k_path / 1e6 for p in other], "o",
+                    mfc="w", mec=col, ms=6, label="other equilibria probed (loaded peak relaxed, "
+                                                  "below's end, baselines' ends)")
+        noise = v.get("k_noise", math.nan)
+        if math.isfinite(noise):
+            ax.axhspan(-CLEARLY * noise / 1e6, CLEARLY * noise / 1e6, color=col, alpha=0.12,
+                       label=f"noise band: +-{CLEARLY:g} x k_noise ({noise / 1e6:.2g} MPa)")
+        if math.isfinite(v.get("c_cross", math.nan)):
+            ax.axvline(v["c_cross"] / 1e3, color=col, ls="--", lw=1,
+                       label=f"k_path = 0: c = {v['c_cross'] / 1e3:.2f} kPa")
+        if math.isfinite(res.c_peak):
+            ax.axvline(res.c_peak / 1e3, color="C3", ls=":", lw=1.2,
+                       label=f"the largest c held at rest: {res.c_peak / 1e3:.2f} kPa "
+                             f"(+{res.holds[res.switches['past']][2] - res.c_peak:g} Pa failed)"
+                       if "past" in res.switches else "the largest c held at rest")
+        drawn = True
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xlabel("c at rest of the state probed [kPa]")
+    ax.set_ylabel(r"$k_{path} = dc / d\varepsilon_1$ at rest [MPa]")
+    ax.set_title(f"DEM ({n} disks): the path's static stiffness at rest, W2 = dc d eps1 "
+                 "(kinematic probes)", fontsize=10)
+    ax.grid(alpha=0.3)
+    if drawn:
+        ax.legend(fontsize=7, loc="best")
+    else:
+        ax.text(0.5, 0.5, "no kinematic probe (--no-probes, or no equilibrium)", ha="center",
+                transform=ax.transAxes)
+    save_figure(fig, path, dpi=120)

@@ -633,7 +633,8 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
                      "reached either.")
     if c.get("burst"):
         from .crosscheck_burst import burst_report_lines
-        L += [""] + burst_report_lines(c["burst"], figs.get("burst"), figs.get("burst_eq1"))
+        L += [""] + burst_report_lines(c["burst"], figs.get("burst"), figs.get("burst_eq1"),
+                                       figs.get("burst_w2"))
     L += ["", "## Wall times", ""] + [f"- {k}: {v:.1f} s" for k, v in timings.items()] + [""]
     with atomic_open(os.path.join(out, "report.md")) as f:
         f.write("\n".join(L))
@@ -724,6 +725,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
         c["burst"] = cb.burst_conclusions(bparts, d200[0]["eta_w2"] if d200 else None,
                                           (fem["summary"] or {}).get("events"))
         figs["burst"] = cb.burst_figure(out_dir, bparts)
+        figs["burst_w2"] = cb.w2_path_figure(out_dir, bparts)
         figs["burst_eq1"] = cb.burst_eq1_figure(
             out_dir, os.path.join(out_dir, "burst", "fem", "history.csv"),
             os.path.join(out_dir, "burst", "dem", "history.csv"))

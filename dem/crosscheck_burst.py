@@ -18,7 +18,7 @@ import os
 import numpy as np
 
 __all__ = ["burst_part", "burst_conclusions", "burst_figure", "burst_eq1_figure",
-           "burst_report_lines",
+           "burst_report_lines", "w2_paths", "w2_path_figure",
            "BURST_RATIOS", "BURST_FRACTIONS"]
 
 BURST_RATIOS = (-2.0,)
@@ -67,7 +67,14 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
     log(f"burst: material point, R {list(ratios)}, start fractions {list(fractions)}")
     h = hb.run_burst(P, ratios, fractions, 1e-4 * P.p0, sp)
     area = sp.width * sp.height
-    out["hmodel"] = {"rows": _rows(h.rows), "eta_peak": h.eta_peak,
+    # the path's own W2 from the material's tangent at every state of each path
+    w2p = []
+    for info in h.paths:
+        c, k = hb.path_stiffness(info.start, P, info.ratio, 1e-5, len(info.c) - 1)
+        w2p.append({"ratio": info.ratio, "start_fraction": info.start_fraction,
+                    "c": c.tolist(), "k": k.tolist(), "c_start": float(info.c[0]),
+                    "c_peak": float(info.c[info.k_peak]) if info.k_peak is not None else None})
+    out["hmodel"] = {"rows": _rows(h.rows), "eta_peak": h.eta_peak, "w2_path": w2p,
                      "histories": [{"ratio": x["ratio"], "start_fraction": x["start_fraction"],
                                     "switch": x["switch"], "t": x["t"], "ke_density": x["ke"] / area}
                                    for x in h.histories]}
@@ -81,6 +88,7 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
     fem_keys = ("ratio", "start_fraction", "switch", "eta_start", "eta_peak_c", "fraction_peak_c",
                 "c_peak", "c_switch", "dc", "outcome", "ke_growth", "mp_eta_peak_c")
     out["fem"] = {"rows": _rows(f.rows, fem_keys),
+                  "w2_path": _fem_w2_path(os.path.join(fdir, "paths.csv"), f.rows),
                   "eta_peak": f.summary["material_point_drained_peak"]["eta"],
                   "histories": _csv_histories(os.path.join(fdir, "history.csv"), "ke",
                                               fb.width * fb.height)}
@@ -94,9 +102,119 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
         st, _ = io.load_state(os.path.join(dem_biaxial_dir, "states", f"state_f{fractions[0]:.3f}.npz"))
         vol = (st.walls[1] - st.walls[0]) * (st.walls[3] - st.walls[2]) * st.params.thickness
         out["dem"] = {"rows": _rows(rows), "eta_peak": summ["drained_eta_peak"],
+                      "w2_path": _dem_w2_path(summ),
                       "histories": _csv_histories(os.path.join(ddir, "history.csv"),
                                                   "ke_backbone", vol)}
     return out
+
+
+def _fem_w2_path(paths_csv, rows):
+    """The FE's path W2 from its static path (paths.csv, the specimen's own records): k_path =
+    dc/d eps1 [Pa] between successive records, at the c of the first of each pair."""
+    import csv
+    runs = {}
+    with open(paths_csv) as f:
+        for r in csv.DictReader(f):
+            if r.get("source", "fe") != "fe":
+                continue
+            runs.setdefault((float(r["ratio"]), float(r["start_fraction"])), []).append(
+                (float(r["eps1"]), float(r["c"])))
+    out = []
+    for (ratio, f), pts in runs.items():
+        e, c = np.array(pts).T
+        row = next((r for r in rows if (r["ratio"], r["start_fraction"]) == (ratio, f)), {})
+        cp = row.get("c_peak")
+        out.append({"ratio": ratio, "start_fraction": f, "c": c[:-1].tolist(),
+                    "k": (np.diff(c) / np.diff(e)).tolist(), "c_start": float(c[0]),
+                    "c_peak": float(cp) if cp is not None and np.isfinite(cp) else None})
+    return out
+
+
+def _dem_w2_path(summary):
+    """The DEM's path W2 at rest: the kinematic probes of the staircase's equilibria (dem burst's
+    summary.json, paths[].k_path and theory), at the c at rest of each state probed."""
+    out = []
+    for p in summary["paths"]:
+        pr = [x for x in p.get("k_path", []) if x["key"] == "relaxed_start"
+              or (x["key"].startswith("h") and x["outcome"] == "equilibrium")]
+        th = p.get("theory") or {}
+        if not pr:
+            continue
+        pr.sort(key=lambda x: x["c"])
+        out.append({"ratio": p["ratio"], "start_fraction": p["start_fraction"],
+                    "c": [x["c"] for x in pr], "k": [x["k_path"] for x in pr],
+                    "c_start": pr[0]["c"], "c_peak": th.get("c_peak_rest"),
+                    "theory": th})
+    return out
+
+
+def w2_paths(parts: dict) -> dict:
+    """Per part, ratio and start fraction: k_path at the start, where it crosses 0 as a fraction
+    of the rise of c to the part's c peak, (c_cross - c_start) / (c_peak - c_start) (1: at the
+    peak), and the DEM's verdict and overshoot."""
+    out = {}
+    for name, p in parts.items():
+        rows = []
+        for w in p.get("w2_path") or []:
+            c, k = np.asarray(w["c"]), np.asarray(w["k"])
+            d = {"ratio": w["ratio"], "start_fraction": w["start_fraction"],
+                 "k_start": float(k[0]) if len(k) else None, "cross_fraction": None,
+                 "verdict": (w.get("theory") or {}).get("verdict"),
+                 "overshoot_c": (w.get("theory") or {}).get("overshoot_c")}
+            if name == "dem":
+                cx = (w.get("theory") or {}).get("c_cross")
+                cp = w.get("c_peak")
+            else:
+                neg = np.flatnonzero(k <= 0)
+                cx = None
+                if len(neg) and neg[0] > 0:
+                    a = int(neg[0]) - 1
+                    cx = float(np.interp(0.0, [k[a + 1], k[a]], [c[a + 1], c[a]]))
+                cp = w.get("c_peak")
+            if cx is not None and cp is not None and np.isfinite(cx) and cp != w["c_start"]:
+                d["cross_fraction"] = (cx - w["c_start"]) / (cp - w["c_start"])
+            rows.append(d)
+        out[name] = rows
+    return out
+
+
+def w2_path_figure(out, parts: dict, name="fig_burst_w2_path.png") -> str | None:
+    """The path's own W2 in the three parts side by side: k_path = dc/d eps1 over its value at
+    the path's start, against the rise of c, (c - c_start) / (c_peak - c_start) (each part's own
+    peak: the DEM's at rest), the material point from its tangent, the FE from its static path,
+    the DEM from its kinematic probes at rest. Where k_path crosses 0 W2 of the path vanishes;
+    a part whose c peak lies past that (x > 1 - 0 crossing) held G past it."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from hmodel.io import save_figure
+    color = {"hmodel": "C0", "fem": "C1", "dem": "C3"}
+    style = {"hmodel": "-", "fem": "--", "dem": "o-"}
+    fig, ax = plt.subplots(figsize=(7.5, 5))
+    drawn = False
+    for part, p in parts.items():
+        for w in p.get("w2_path") or []:
+            c, k = np.asarray(w["c"], float), np.asarray(w["k"], float)
+            if not len(k) or w.get("c_peak") is None or w["c_peak"] == w["c_start"] or k[0] == 0:
+                continue
+            x = (c - w["c_start"]) / (w["c_peak"] - w["c_start"])
+            ax.plot(x, k / k[0], style[part], color=color[part], ms=5, lw=1.2,
+                    label=f"{LABEL[part]}, R = {w['ratio']:g}, f = {w['start_fraction']:g}")
+            drawn = True
+    if not drawn:
+        plt.close(fig)
+        return None
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.axvline(1.0, color="0.5", ls=":", lw=1)
+    ax.set_xlabel(r"$(c - c_{start}) / (c_{peak} - c_{start})$: the rise of c to each part's "
+                  "peak (the DEM's at rest)")
+    ax.set_ylabel(r"$k_{path} / k_{path}(start)$, $k_{path} = dc/d\varepsilon_1$")
+    ax.set_title("The path's own second-order work W2 = dc d eps1: material point (tangent),\n"
+                 "FE (static path), DEM (kinematic probes at rest)", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower left")
+    save_figure(fig, os.path.join(out, name))
+    return name
 
 
 def burst_conclusions(parts: dict, eta_first_w2: float | None, fem_events: dict | None) -> dict:
@@ -105,7 +223,8 @@ def burst_conclusions(parts: dict, eta_first_w2: float | None, fem_events: dict 
     exactly where W2 vanished along the path, within the switches' resolution). With the H-model's
     first W2 = 0 of the drained path (``eta_first_w2``) and the FE's first lam_min(K_s) <= 0
     (``fem_events``: fem_part's events summary)."""
-    c = {"parts": {}, "eta_first_w2": eta_first_w2, "eta_fem_lam_ks": None}
+    c = {"parts": {}, "eta_first_w2": eta_first_w2, "eta_fem_lam_ks": None,
+         "w2_paths": w2_paths(parts)}
     ev = (fem_events or {}).get("lam_min_ks") or {}
     if ev.get("row") is not None:
         c["eta_fem_lam_ks"] = ev.get("eta")
@@ -227,7 +346,8 @@ def burst_eq1_figure(out, fem_history, dem_history, name="fig_burst_eq1.png") ->
     return name
 
 
-def burst_report_lines(c: dict, fig: str | None, fig_eq1: str | None = None) -> list:
+def burst_report_lines(c: dict, fig: str | None, fig_eq1: str | None = None,
+                       fig_w2: str | None = None) -> list:
     """The report's burst section: per ratio and start fraction, each part's c peak and switch
     outcomes, then the verdict with its numbers (the growth of E_c from rest past the peak)."""
     L = ["## Failure made to happen: the proportional strain path and the burst (Eq. 1)", "",
@@ -244,6 +364,26 @@ def burst_report_lines(c: dict, fig: str | None, fig_eq1: str | None = None) -> 
         L += ["Eq. 1's terms of the past runs, the FE's beside the DEM's (who gives the kinetic "
               "energy: -W2_int > 0, the contacts or the material points):", "",
               f"![Eq. 1]({fig_eq1})", ""]
+    wp = c.get("w2_paths") or {}
+    if any(wp.values()):
+        L += ["**The path's own W2, side by side.** W2 = dc d eps1 along the path: the material "
+              "point's from its tangent, the FE's from its static path, the DEM's from kinematic "
+              "probes at rest (docs/burst.md). Where k_path = dc/d eps1 crosses 0, as a fraction of "
+              "the rise of c to the part's c peak (1: at the peak; the DEM's peak is the largest c "
+              "its dead load held at rest):", ""]
+        if fig_w2:
+            L += [f"![W2 along the path]({fig_w2})", ""]
+        L += ["| part | R | f | k_path at the start [MPa] | k_path = 0 at (fraction of the rise) | "
+              "DEM: verdict, the dead load held past it [Pa] |", "|---|---|---|---|---|---|"]
+        f3 = lambda x, s: "-" if x is None or not np.isfinite(x) else format(x, s)
+        for name, rows in wp.items():
+            for d in rows:
+                L.append(f"| {LABEL[name]} | {d['ratio']:g} | {d['start_fraction']:g} | "
+                         f"{f3(d['k_start'] / 1e6 if d['k_start'] is not None else None, '.4g')} | "
+                         f"{f3(d['cross_fraction'], '.3f')} | "
+                         + (f"{d['verdict']}, {f3(d['overshoot_c'], '.0f')} |" if name == "dem"
+                            else "- |"))
+        L.append("")
     L += ["| part | R | f | eta_start | eta of the c peak (fraction of the drained peak) | below | "
           "past | E_c growth past |", "|---|---|---|---|---|---|---|---|"]
     fmt = lambda x, s: "-" if x is None or not np.isfinite(x) else format(x, s)

@@ -41,7 +41,7 @@ displacements since 0 as sums of the centred ones), W1_int = W1_ext - U0 (= sum_
 delta_c), W2_ext = W_ext - W1_ext and W2_int = W_int - W1_int (= sum_c (f_c - f_c(0)) . d
 delta_c, the paper's Eq. 15 integrated, f = 0 where a contact is absent):
 
-    E_c(t) - E_c(0) = W2_ext - W2_int + W_damp + U0      (``eq1_residual``).
+    E_c(t) - E_c(0) = W2_ext - W2_int + W_damp + U0      (``eq1_bookkeeping``).
 
 The ledger only reads the trajectory (``kernels.advance``): a run has the same bits with it as
 without it.  Its per-disk sums make every term independent of the number of threads, to the bit.
@@ -58,7 +58,7 @@ from .walls import DEAD
 
 # the columns the ledger adds to a history (fixed names: other tools read them)
 COLUMNS = ["ke", "w_ext", "w_int", "w_damp", "e_elastic", "d_slip", "d_roll", "w2_ext", "w2_int",
-           "u0", "eq1_residual"]
+           "u0", "eq1_bookkeeping"]
 # and the ones beside them: the dashpot's dissipation, the rolling moments' and the wall
 # contacts' shares of W_int, the residuals of the first-order balance and of the split of W_int,
 # E_c - E_c(0) and the time since the start [s]
@@ -80,7 +80,7 @@ class LedgerRecord(NamedTuple):
     w2_ext: float
     w2_int: float
     u0: float
-    eq1_residual: float
+    eq1_bookkeeping: float
     d_dash: float
     w_int_roll: float
     w_int_wall: float
@@ -213,13 +213,13 @@ def kinetic_energy(sim) -> float:
     return ke
 
 
-def max_eq1_residual(history, columns) -> float:
-    """The largest ``eq1_residual`` of a history (rows with ``columns``), the ``eq1_residual``
+def max_eq1_bookkeeping(history, columns) -> float:
+    """The largest ``eq1_bookkeeping`` of a history (rows with ``columns``), the ``eq1_bookkeeping``
     column of probes.csv and burst.csv."""
     h = np.asarray(history, float)
     if h.size == 0:
         return math.nan
-    return float(np.max(h[:, list(columns).index("eq1_residual")]))
+    return float(np.max(h[:, list(columns).index("eq1_bookkeeping")]))
 
 
 def plot_ledger(path, panels):

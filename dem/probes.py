@@ -27,7 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .ledger import Ledger, max_eq1_residual
+from .ledger import Ledger, max_eq1_bookkeeping
 from .settle import HISTORY_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .threads import ThreadChooser
@@ -245,7 +245,7 @@ def run_probe(state: State, alpha_deg: float, sliding: bool, opts: ProbeOptions 
                # Eq. 1 over the probe: the external second-order work V ds.de [J] against
                # the change of kinetic energy [J] (a failure turns the first into the second)
                d2_work=float(vol0 * (dsig @ deps)), d_kinetic_energy=sim.kinetic_energy() - ke0,
-               eq1_residual=max_eq1_residual(st.history, HISTORY_COLUMNS),
+               eq1_bookkeeping=max_eq1_bookkeeping(st.history, HISTORY_COLUMNS),
                n_contacts_R=len(c0), n_contacts_end=len(c1),
                n_created=len(set(c1) - set(c0)), n_lost=len(set(c0) - set(c1)),
                history=st.history.tolist())
@@ -256,7 +256,7 @@ COLUMNS = ["alpha_sigma", "outcome", "w2", "w2_micro", "w2n", "w2t", "w2_unbalan
            "plastic", "ds1", "ds2", "de1", "de2", "de1_elastic", "de2_elastic", "de_plastic_ratio",
            "w2_elastic", "strain_ratio", "ke_peak", "creep_rate", "d2_work", "d_kinetic_energy",
            "outcome_elastic", "converged", "converged_elastic", "steps", "steps_elastic",
-           "unbalanced", "n_contacts_R", "n_created", "n_lost", "eq1_residual"]
+           "unbalanced", "n_contacts_R", "n_created", "n_lost", "eq1_bookkeeping"]
 HISTORY_FILE_COLUMNS = ["alpha_sigma", "sliding"] + HISTORY_COLUMNS
 
 
@@ -494,9 +494,9 @@ def combine(results, opts: ProbeOptions):
                                  "n_contacts_R", "n_created", "n_lost", "history")}
         # the largest Eq. 1 residual of the direction's two runs (NaN for runs of a checkpoint
         # written before the ledger)
-        got = [v for v in (t.get("eq1_residual"), e.get("eq1_residual"))
+        got = [v for v in (t.get("eq1_bookkeeping"), e.get("eq1_bookkeeping"))
                if v is not None and not math.isnan(v)]
-        row["eq1_residual"] = max(got) if got else math.nan
+        row["eq1_bookkeeping"] = max(got) if got else math.nan
         row.update(plastic=int(ratio > opts.plastic_tol), de1_elastic=e["de1"],
                    de2_elastic=e["de2"], de_plastic_ratio=ratio, w2_elastic=e["w2"],
                    outcome_elastic=e["outcome"], converged_elastic=e["converged"],
@@ -538,7 +538,7 @@ def plot_probe_ledger(rows, path, note=""):
     of the smallest W2 (the nearest to the boundary) and the failure of the largest backbone
     kinetic energy; one panel when only one kind is there, none without a ledger."""
     from .ledger import plot_ledger
-    k = HISTORY_COLUMNS.index("eq1_residual")
+    k = HISTORY_COLUMNS.index("eq1_bookkeeping")
     led = [r for r in rows if r["history"] and len(r["history"][0]) > k
            and not math.isnan(r["history"][-1][k])]
     eq = [r for r in led if r["outcome"] == "equilibrium"]

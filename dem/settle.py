@@ -136,7 +136,14 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
     that holds something else than the two wall stresses (``dem.burst``: |c - c_target|; then
     ``target_xy`` is not used); default max |(s_xx, s_yy) - target_xy|.  ``contacts0``: the
     contacts at the start (``dem.anatomy.contact_state``), for the anatomy columns of every
-    check."""
+    check: what changed since the start, and the unstable contacts of the last
+    ``dem.anatomy.UNSTABLE_WINDOW`` checks (since the start for the first ones), d f . d l below
+    -``UNSTABLE_TAU`` times the start's ``energy_scale``."""
+    from collections import deque
+
+    from .anatomy import UNSTABLE_TAU, UNSTABLE_WINDOW, energy_scale
+    window = deque([contacts0], maxlen=UNSTABLE_WINDOW + 1) if contacts0 is not None else None
+    tau = UNSTABLE_TAU * energy_scale(contacts0, sim.params.kn) if contacts0 is not None else 0.0
     target = None if stress_error else np.asarray(target_xy, float)
     e = lambda: sim.strain()[::-1]                      # (eps1, eps2) = (y, x)
     eps0 = e() if eps0 is None else np.asarray(eps0, float)
@@ -154,7 +161,7 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
         ratio = float(np.linalg.norm(de) / el) if el else math.nan
         hist.append([sim.step, sim.kinetic_energy(), backbone_kinetic_energy(sim, snap), ub,
                      de[0] + eps0[0], de[1] + eps0[1], sy, sx, err, ratio] + ledger_row(sim)
-                    + anatomy_row(sim, contacts0))
+                    + anatomy_row(sim, contacts0, window, tau))
         if progress:
             progress(steps, hist[-1])
         outcome = _decide(np.asarray(hist[-(w_checks + 1):]), de, ratio, rule, sim.n,
@@ -181,13 +188,20 @@ def ledger_row(sim) -> list:
     return sim.ledger.read().row()
 
 
-def anatomy_row(sim, contacts0) -> list:
+def anatomy_row(sim, contacts0, window=None, tau=0.0) -> list:
     """The anatomy columns (``ANATOMY_COLUMNS``) of ``sim`` now against the contacts at the start
-    ``contacts0``, or NaN without them."""
+    ``contacts0`` (NaN without them) and, for the unstable contacts, against the oldest of
+    ``window`` (a deque of contact states of the last checks, the present one appended here;
+    None: since the start); ``tau`` [J]: the threshold of an unstable contact."""
     if contacts0 is None:
         return [math.nan] * len(ANATOMY_COLUMNS)
     from .anatomy import anatomy, contact_state
-    a = anatomy(contacts0, contact_state(sim), sim.n)
+    s = contact_state(sim)
+    prev = None
+    if window is not None:
+        prev = window[0]
+        window.append(s)
+    a = anatomy(contacts0, s, sim.n, prev, tau)
     return [a[c] for c in ANATOMY_COLUMNS]
 
 

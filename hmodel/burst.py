@@ -301,6 +301,21 @@ def _tie_response(state, params, ratio, x):
     return float(c), float(dc), ns
 
 
+def path_stiffness(state: HState, params: HParams, ratio: float, d_eps1: float, n: int):
+    """The path's own W2 along the proportional path from ``state``, from the material's
+    consistent tangent: for each of ``n`` increments d eps = (d_eps1, R d_eps1, 0), c [Pa] at
+    its start and k_path = dc/d eps1 [Pa] of the increment (the tangent along the tie: W2 =
+    k_path d eps1^2 per unit volume, zero where c peaks). Returns (c (n,), k (n,)), the c of the
+    same states as ``proportional_path``'s records 0 .. n-1."""
+    c, k = np.empty(n), np.empty(n)
+    st = state
+    for i in range(n):
+        s = to_voigt(st.stress)[0]
+        c[i] = s[0] + ratio * s[1]
+        _, k[i], st = _tie_response(st, params, ratio, d_eps1)
+    return c, k
+
+
 def elastic_stiffness(state: HState, params: HParams, ratio: float) -> float:
     """dc/d eps1 [Pa] along the tie for sliding prevented (the elastic tangent of the state)."""
     C = update_full(state, np.zeros((2, 2)), params, allow_sliding=False, extras=False).tangent

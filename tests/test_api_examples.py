@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from hmodel.options import COMPILE_NOTICE
+from tests._interrupt import HANG_S
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "docs" / "examples").glob("*.py"))
@@ -34,7 +35,7 @@ def _env():
 def _run(argv, cwd):
     # a timeout only against a hang (the examples take seconds; a first compilation minutes)
     return subprocess.run([sys.executable, *argv], cwd=cwd, env=_env(), capture_output=True,
-                          text=True, timeout=900)
+                          text=True, timeout=HANG_S)
 
 
 def test_examples_exist():

@@ -18,6 +18,7 @@ import pytest
 
 import hmodel  # noqa: F401  (registers the listener)
 from hmodel import options
+from tests._interrupt import HANG_S
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -87,7 +88,7 @@ def test_one_copy_of_the_code(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     r = subprocess.run([sys.executable, "-c", "import hmodel, fem, dem; "
                         "print('\\n'.join(m.__file__ for m in (hmodel, fem, dem)))"],
-                       cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+                       cwd=tmp_path, env=env, capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 0, r.stderr
     for f in r.stdout.split():
         assert Path(f).resolve().is_relative_to(ROOT), (

@@ -177,3 +177,15 @@ def test_burst_section_failure_exactly_where_w2_vanishes_along_the_path(xc):
     assert "times past the peak" in rep
     for part in ("fem", "dem"):
         assert (out / "burst" / part / "burst.csv").exists()
+    # the path's own W2 side by side: the material point's (its tangent) and the FE's (its
+    # static path) cross 0 at their c peak (within the last step of the rise: 2 %), the DEM's
+    # (kinematic probes at rest) at or before the largest c its dead load held, with the verdict
+    wp = b["w2_paths"]
+    for name in ("hmodel", "fem"):
+        (d,) = wp[name]
+        assert d["k_start"] > 0 and abs(d["cross_fraction"] - 1.0) <= 0.02, (name, d)
+    (d,) = wp["dem"]
+    assert d["k_start"] > 0 and d["verdict"] in ("passes", "contradicted", "no verdict")
+    assert d["cross_fraction"] is None or d["cross_fraction"] <= 1.0 + 1e-12
+    assert "(fig_burst_w2_path.png)" in rep and "The path's own W2, side by side" in rep
+    assert (out / "fig_burst_w2_path.png").stat().st_size > 20_000

@@ -1,8 +1,9 @@
 """The anatomy of a burst (``dem.anatomy``): the contact state of a Simulation, the anatomy
 columns on hand-made cases with known answers (two disks, a chain, a star, contacts created and
-lost, the backbone, walls), the clusters against a brute-force union-find, a 300-disk sample
-sheared by moving walls against ``dem.burst.contact_work`` and an independent per-contact
-reference, the sliding flag against the kernel's own Coulomb decision, the velocity
+lost, the backbone, walls, the increment of the unstable contacts), the clusters against a
+brute-force union-find, a 300-disk sample sheared by moving walls against an independent
+per-contact reference and the walls' Eq. 14, the contact state taken at one time (the last
+step's positions), the sliding flag against the kernel's own Coulomb decision, the velocity
 fluctuation, the VTU files read back and the figure."""
 import math
 import os
@@ -10,10 +11,11 @@ import os
 import numpy as np
 import pytest
 
-from dem.anatomy import (ANATOMY_COLUMNS, SLIDE_TOL, ContactState, anatomy, contact_state,
-                         own_work, plot_anatomy, split_keys, unstable_clusters,
-                         velocity_fluctuation, wall_velocities, write_anatomy_vtk)
-from dem.burst import _branches, contact_table, contact_work
+from dem import kernels
+from dem.anatomy import (ANATOMY_COLUMNS, INWARD, SLIDE_TOL, ContactState, anatomy, branches,
+                         contact_state, contact_work, increment_on, own_work, plot_anatomy,
+                         split_keys, step_positions, unstable_clusters, velocity_fluctuation,
+                         wall_velocities, write_anatomy_vtk)
 from dem.params import DemParams
 from dem.simulation import Simulation
 from dem.threads import ThreadChooser
@@ -38,7 +40,7 @@ def _state(n, x, forces, sliding=(), walls=BOX):
     items = sorted((_key(c, n), np.asarray(f, float), c in sliding) for c, f in forces.items())
     keys = np.array([k for k, _, _ in items], np.int64).reshape(-1)
     force = np.array([f for _, f, _ in items]).reshape(-1, 2)
-    br = _branches(keys, x, walls)
+    br = branches(keys, x, walls)
     nrm = br / np.linalg.norm(br, axis=1)[:, None]
     fn = -np.sum(force * nrm, 1)
     ft = force[:, 1] * nrm[:, 0] - force[:, 0] * nrm[:, 1]
@@ -54,7 +56,7 @@ def _pair(n, x0, x1, signs, scale=5.0, walls=BOX, sliding=()):
     f0, f1, w2 = {}, {}, {}
     for c, sg in signs.items():
         k = np.array([_key(c, n)])
-        l0, l1 = _branches(k, np.asarray(x0, float), walls)[0], _branches(k, np.asarray(x1, float), walls)[0]
+        l0, l1 = branches(k, np.asarray(x0, float), walls)[0], branches(k, np.asarray(x1, float), walls)[0]
         f0[c] = -10.0 * l0 / np.linalg.norm(l0)
         f1[c] = f0[c] + sg * scale * (l1 - l0)
         w2[c] = sg * scale * float((l1 - l0) @ (l1 - l0))
@@ -84,6 +86,32 @@ def test_two_disks_known_answers():
     assert a["w2_int_secant"] == pytest.approx(-0.1, rel=1e-12)
     assert (a["n_unstable"], a["n_clusters"], a["largest_cluster"]) == (1, 1, 1)
     assert a["sliding_share"] == 1.0
+
+
+def test_the_unstable_contacts_are_those_of_the_last_increment():
+    # since 0 the contact is loaded (w2 = +0.5 > 0, stable); over the increment from s_prev
+    # (the force (-13, 5) at l = (1.95, 0.05)) to now, df = (1, -2), dl = (-0.05, 0.05):
+    # w2 = -0.15 < 0, unstable; the secant columns stay the ones since 0
+    x0, xp, x1 = [[0, 0], [2, 0]], [[0, 0], [1.95, 0.05]], [[0, 0], [1.9, 0.1]]
+    s0 = _state(2, x0, {(0, 1): (-10, 0)})
+    sp = _state(2, xp, {(0, 1): (-13, 5)})
+    s = _state(2, x1, {(0, 1): (-12, 3)})
+    since0, inc = anatomy(s0, s, 2), anatomy(s0, s, 2, sp)
+    assert since0["n_unstable"] == 0 and (inc["n_unstable"], inc["n_clusters"]) == (1, 1)
+    for k in ("w2n_int", "w2t_int", "w2_int_secant", "contacts_lost", "sliding_share"):
+        assert inc[k] == since0[k], k
+    assert own_work(sp, s).w2[0] == pytest.approx(-0.15, rel=1e-12)
+    # with a threshold: unstable only below -tau; the raw count keeps it
+    a = anatomy(s0, s, 2, sp, tau=0.2)
+    assert (a["n_unstable_raw"], a["n_unstable"], a["n_clusters"]) == (1, 0, 0)
+    assert anatomy(s0, s, 2, sp, tau=0.1)["n_unstable"] == 1
+    with pytest.raises(ValueError, match="tau"):
+        anatomy(s0, s, 2, sp, tau=-1.0)
+    w2, label = increment_on(own_work(s0, s).keys, sp, s, 2)
+    assert w2 == pytest.approx([-0.15], rel=1e-12) and label.tolist() == [0]
+    assert [x.tolist() for x in increment_on(own_work(s0, s).keys, None, s, 2)] == [[0.0], [-1]]
+    with pytest.raises(ValueError, match="n_disks"):
+        anatomy(s0, s, 2, _state(3, [[0, 0], [2, 0], [4, 0]], {(0, 1): (-10, 0)}))
 
 
 def test_contacts_created_and_lost_count_with_zero_force_at_the_missing_end():
@@ -155,7 +183,7 @@ def test_a_star_through_one_disk_is_one_cluster():
     assert [anatomy(s0, s, 9)[k] for k in ("n_unstable", "n_clusters", "largest_cluster")] == [6, 2, 5]
 
 
-def test_wall_contacts_count_as_unstable_but_not_in_clusters_and_make_the_backbone():
+def test_wall_contacts_count_as_unstable_join_their_disks_cluster_and_make_the_backbone():
     # a triangle 0-1-2, disk 3 touching 2 only (a rattler), then touching the left wall too
     x0 = [[0, 0], [2, 0], [1, 1.7], [1, 3.6]]
     x1 = _moved(x0, 3)
@@ -171,13 +199,26 @@ def test_wall_contacts_count_as_unstable_but_not_in_clusters_and_make_the_backbo
     s0, s, w2 = _pair(4, x0, x1, tri, walls=walls, sliding={(0, 2)})
     a = anatomy(s0, s, 4)
     assert a["sliding_share"] == 0.25         # of the four grain contacts, not of all five
-    # the wall contact: unstable, not a node of the clusters; disk 3 (one grain and one wall
-    # contact) joins the backbone: N_b = 4, C_b = 4
-    assert (a["n_unstable"], a["n_clusters"], a["largest_cluster"]) == (3, 1, 2)
+    # the wall contact: unstable, in the cluster of its disk 3 (linked to (2, 3) through disk 3,
+    # which (0, 2) joins through disk 2), counted as a wall contact; disk 3 (one grain and one
+    # wall contact) joins the backbone: N_b = 4, C_b = 4
+    assert (a["n_unstable"], a["n_clusters"], a["largest_cluster"]) == (3, 1, 3)
+    assert a["n_unstable_walls"] == 1
     assert a["coordination"] == pytest.approx(2.0, rel=1e-15)
     assert a["w2_int_secant"] == pytest.approx(sum(w2.values()), rel=1e-12)
     assert a["w2n_int"] + a["w2t_int"] == pytest.approx(sum(v for c, v in w2.items() if c[1] != "w"),
                                                         rel=1e-12)
+
+
+def test_two_contacts_on_one_wall_are_not_linked_through_it():
+    # disks 0 and 1 far apart, each on the left wall, both wall contacts unstable: two clusters
+    x0 = [[1.0, 0.0], [1.0, 6.0]]
+    x1 = _moved(x0, 4)
+    walls = np.array([0.5, 10.0, -10.0, 10.0])
+    s0, s, _ = _pair(2, x0, x1, {(0, "w", 0): -1, (1, "w", 0): -1}, walls=walls)
+    a = anatomy(s0, s, 2)
+    assert (a["n_unstable"], a["n_unstable_walls"], a["n_clusters"], a["largest_cluster"]) == \
+        (2, 2, 2, 1)
 
 
 def test_states_of_another_number_of_disks_are_refused():
@@ -190,10 +231,12 @@ def test_states_of_another_number_of_disks_are_refused():
 
 
 def _union_find(keys, unstable, n):
-    """Clusters of the unstable grain contacts by brute force: union-find over every pair of
-    unstable contacts that share a disk.  Returns the clusters as sorted lists of contact rows."""
+    """Clusters of the unstable contacts, grain and wall, by brute force: union-find over every
+    pair of unstable contacts that share a disk (a wall contact has its one disk; a wall is not a
+    disk).  Returns the clusters as sorted lists of contact rows."""
     i, j, grain = split_keys(keys, n)
-    nodes = [a for a in range(len(keys)) if unstable[a] and grain[a]]
+    disks = lambda a: {i[a], j[a]} if grain[a] else {i[a]}
+    nodes = [a for a in range(len(keys)) if unstable[a]]
     parent = {a: a for a in nodes}
 
     def find(a):
@@ -205,7 +248,7 @@ def _union_find(keys, unstable, n):
     for u in range(len(nodes)):
         for v in range(u + 1, len(nodes)):
             a, b = nodes[u], nodes[v]
-            if {i[a], j[a]} & {i[b], j[b]}:
+            if disks(a) & disks(b):
                 parent[find(a)] = find(b)
     groups = {}
     for a in nodes:
@@ -218,14 +261,15 @@ def test_clusters_match_a_brute_force_union_find(small_sample, share):
     sim = Simulation(small_sample)
     s = contact_state(sim)
     rng = np.random.default_rng(int(share * 10))
-    unstable = rng.random(len(s.keys)) < share       # wall contacts among them: not nodes
+    unstable = rng.random(len(s.keys)) < share       # wall contacts among them
+    _, _, grain = split_keys(s.keys, sim.n)
+    assert np.any(unstable & ~grain)
     label, sizes = unstable_clusters(s.keys, unstable, sim.n)
     ref = _union_find(s.keys, unstable, sim.n)
     assert sizes.tolist() == [len(g) for g in ref]
     # the same partition, numbered by decreasing size then first contact
     assert [sorted(np.flatnonzero(label == c).tolist()) for c in range(len(ref))] == ref
-    _, _, grain = split_keys(s.keys, sim.n)
-    assert np.all(label[~(unstable & grain)] == -1)
+    assert np.all(label[~unstable] == -1)
 
 
 # ------------------------------------------------------------------------------------------
@@ -275,10 +319,26 @@ def sample300():
     return sim.state()
 
 
-def _reference(sim0, sim, snap0, snap):
-    """The anatomy by an independent per-contact reference: dictionaries keyed by the disks
-    (as ``dem.probes.run_probe`` builds its sums), plain loops, union-find."""
-    n = sim.n
+def _at_step(sim):
+    """The last step's positions, walls and contacts, computed here: x - dt v, the walls back by
+    their last inward move, ``kernels.contact_snapshot`` there; and the disks' net forces."""
+    xs = sim.x - sim.dt * sim.v
+    ws = sim.walls - np.array([1.0, -1.0, 1.0, -1.0]) * sim.prev
+    pl = sim.pairs
+    snap = kernels.contact_snapshot(xs, sim.r, pl.pi, pl.pj, pl.ft, ws, sim.params.kn)
+    ci, cj, fx, fy, _, wp, ww, wf = snap
+    return xs, ws, snap, kernels.net_forces(sim.n, xs, ci, cj, fx, fy, wp, ww, wf)
+
+
+def _reference(at0, at, n):
+    """The anatomy since 0 by an independent per-contact reference: dictionaries keyed by the
+    disks (as ``dem.probes.run_probe`` builds its sums), plain loops, union-find; ``at0``,
+    ``at``: ``_at_step`` at 0 and now."""
+    (x0, walls0, snap0, _), (x, walls, snap, _) = at0, at
+    snap0 = dict(zip(("ci", "cj", "fx", "fy", "fn", "wp", "ww", "wf"), snap0))
+    snap = dict(zip(("ci", "cj", "fx", "fy", "fn", "wp", "ww", "wf"), snap))
+    from types import SimpleNamespace
+    snap0, snap = SimpleNamespace(**snap0), SimpleNamespace(**snap)
     c0 = {(int(i), int(j)): np.array([fx, fy]) for i, j, fx, fy in zip(snap0.ci, snap0.cj, snap0.fx, snap0.fy)}
     c1 = {(int(i), int(j)): np.array([fx, fy]) for i, j, fx, fy in zip(snap.ci, snap.cj, snap.fx, snap.fy)}
     w0 = {(int(p), int(w)): f for p, w, f in zip(snap0.wp, snap0.ww, snap0.wf)}
@@ -288,23 +348,22 @@ def _reference(sim0, sim, snap0, snap):
     own = {}
     for (i, j) in set(c0) | set(c1):
         df = c1.get((i, j), zero) - c0.get((i, j), zero)
-        l0, l1 = sim0.x[j] - sim0.x[i], sim.x[j] - sim.x[i]
+        l0, l1 = x0[j] - x0[i], x[j] - x[i]
         dl = l1 - l0
         nc = l0 / np.linalg.norm(l0)
         tc = np.array([-nc[1], nc[0]])
         w2n += (df @ nc) * (dl @ nc)
         w2t += (df @ tc) * (dl @ tc)
         own[(i, j)] = df @ dl
-    n_wall_unstable = 0
     for (p, w) in set(w0) | set(w1):
         sgn = 1.0 if w % 2 == 0 else -1.0       # the force on the disk along the wall's axis
         ax = w // 2
         dfw = sgn * (w1.get((p, w), 0.0) - w0.get((p, w), 0.0))
-        dlw = (sim.walls[w] - sim.x[p, ax]) - (sim0.walls[w] - sim0.x[p, ax])
+        dlw = (walls[w] - x[p, ax]) - (walls0[w] - x0[p, ax])
         w2w += dfw * dlw
-        n_wall_unstable += dfw * dlw < 0
+        own[(p, n + w)] = dfw * dlw
     bad = [c for c, v in own.items() if v < 0]
-    keys = np.array([i * (n + 4) + j for i, j in bad], np.int64).reshape(-1)
+    keys = np.sort(np.array([i * (n + 4) + j for i, j in bad], np.int64).reshape(-1))
     clusters = _union_find(keys, np.ones(len(keys), bool), n)
     cnt = np.zeros(n, int)
     for i, j in c1:
@@ -315,26 +374,41 @@ def _reference(sim0, sim, snap0, snap):
     nb = int(np.sum(cnt >= 2))
     cb = sum(1 for i, j in c1 if cnt[i] >= 2 and cnt[j] >= 2)
     return {"grain_now": len(c1), "contacts_lost": len(set(c0) - set(c1)), "contacts_created": len(set(c1) - set(c0)),
-            "coordination": 2 * cb / nb, "n_unstable": len(bad) + n_wall_unstable,
+            "coordination": 2 * cb / nb, "n_unstable": len(bad),
+            "n_unstable_walls": sum(1 for c in bad if c[1] >= n),
             "n_clusters": len(clusters), "largest_cluster": max(map(len, clusters), default=0),
             "w2n_int": w2n, "w2t_int": w2t, "w2_int_secant": w2n + w2t + w2w}
 
 
-def test_a_sheared_sample_against_contact_work_and_a_per_contact_reference(sample300):
+def test_a_sheared_sample_against_eq14_and_a_per_contact_reference(sample300):
     sim = _sheared(sample300)
-    sim0 = Simulation(sample300)
-    snap0 = sim.snapshot()
-    s0, t0 = contact_state(sim), contact_table(sim)
-    seen = {"lost": 0, "created": 0, "clusters": 0}
+    sim.run(1)                       # a first step: the step positions differ from the present
+    at0 = at_prev = _at_step(sim)
+    s0 = s_prev = contact_state(sim)
+    seen = {"lost": 0, "created": 0, "clusters": 0, "increments": 0}
     for _ in range(8):
         sim.run(500)
         s = contact_state(sim)
         a = anatomy(s0, s, sim.n)
-        # the paper's Eq. 15 sum, as dem.burst computes it (the same terms in another order)
-        cw = contact_work(t0, contact_table(sim))
-        assert a["w2_int_secant"] == pytest.approx(cw, rel=1e-12)
-        ref = _reference(sim0, sim, snap0, sim.snapshot())
-        for k in ("contacts_lost", "contacts_created", "n_unstable", "n_clusters", "largest_cluster"):
+        at = _at_step(sim)
+        # the unstable contacts of the increment (since the last check) against the reference's
+        inc, ref_inc = anatomy(s0, s, sim.n, s_prev), _reference(at_prev, at, sim.n)
+        for k in ("n_unstable", "n_unstable_walls", "n_clusters", "largest_cluster"):
+            assert inc[k] == ref_inc[k], k
+        assert inc["n_unstable_raw"] == inc["n_unstable"]          # tau = 0
+        seen["increments"] += 0 < inc["n_unstable"] != a["n_unstable"]
+        at_prev, s_prev = at, s
+        # the paper's Eq. 14 (secant) at the step's positions: the contacts' sum is the walls'
+        # second-order work less the unbalanced forces' sum_p dF_p . dx_p, to round-off
+        g = [np.bincount(z[2][6], weights=z[2][7], minlength=4) for z in (at0, at)]
+        w_walls = float(np.sum((g[1] - g[0]) * (at[1] - at0[1]) * INWARD))
+        unb = float(np.sum((at[3] - at0[3]) * (at[0] - at0[0])))
+        cw = contact_work(s0, s)
+        assert cw == pytest.approx(a["w2_int_secant"], rel=1e-12)   # one sum in two orders
+        assert abs(cw - (w_walls - unb)) <= 1e-10 * (abs(cw) + abs(w_walls) + abs(unb))
+        ref = _reference(at0, at, sim.n)
+        for k in ("contacts_lost", "contacts_created", "n_unstable", "n_unstable_walls",
+                  "n_clusters", "largest_cluster"):
             assert a[k] == ref[k], k
         assert a["coordination"] == pytest.approx(ref["coordination"], rel=1e-15)
         _, _, g = split_keys(s.keys, sim.n)
@@ -394,10 +468,13 @@ def test_the_sliding_flag_is_the_kernels_coulomb_decision(sample300, rolling):
     else:
         assert not s.rolling.any()
     # against the normal force at the current positions instead of the step's, the sliding
-    # contacts would not be found: that is why contact_state goes back one step
-    fn_now = s.fn[grain]
+    # contacts would not be found: that is why contact_state goes back one step (its fn is the
+    # step's, which the flag and the force share)
+    i, j, _ = split_keys(keys, sim.n)
+    fn_now = sim.params.kn * (sim.r[i] + sim.r[j] - np.hypot(*(sim.x[j] - sim.x[i]).T))
     naive = np.abs(s.ft[grain]) >= (1 - SLIDE_TOL) * sim.mu * fn_now
     assert not np.array_equal(naive, exp)
+    assert np.array_equal(np.abs(s.ft[grain]) >= (1 - SLIDE_TOL) * sim.mu * s.fn[grain], exp)
     # the elastic probes' law (cap off): nothing slides
     sim.cap_on = False
     assert not contact_state(sim).sliding.any()
@@ -414,9 +491,18 @@ def test_force_is_minus_fn_n_plus_ft_t_and_keys_are_sorted(sample300):
     assert np.abs(np.hypot(s.normal[:, 0], s.normal[:, 1]) - 1).max() <= 1e-15
     assert np.all(np.sum(s.branch * s.normal, 1) > 0)                 # the normal along l
     assert np.abs(s.moment).max() > 0
-    # the contact table of dem.burst: the same keys and forces
-    tab = contact_table(sim)
-    assert np.array_equal(tab.keys, s.keys) and np.array_equal(tab.force, s.force)
+    # one time: the positions, walls, branches and normal forces of the last step's force
+    # evaluation (x - dt v, the walls back by their last move), not of the present
+    xs, ws, snap, _ = _at_step(sim)
+    assert np.array_equal(s.x, xs) and np.array_equal(s.walls, ws)
+    assert not np.array_equal(s.x, sim.x) and not np.array_equal(s.walls, sim.walls)
+    assert np.array_equal(s.branch, np.asarray(branches(s.keys, xs, ws)))
+    i, j, grain = split_keys(s.keys, sim.n)
+    d = np.hypot(*(xs[j[grain]] - xs[i[grain]]).T)
+    assert np.allclose(s.fn[grain], sim.params.kn * (sim.r[i[grain]] + sim.r[j[grain]] - d),
+                       rtol=1e-9, atol=0)
+    assert len(s.keys) == len(snap[0]) + len(snap[5])
+    assert np.array_equal(step_positions(sim)[0], xs)
 
 
 # ------------------------------------------------------------------------------------------
@@ -449,8 +535,10 @@ def test_the_vtu_files_read_back(sample300, tmp_path):
     import meshio
     sim = _sheared(sample300)
     s0 = contact_state(sim)
-    sim.run(3000)
-    paths = write_anatomy_vtk(tmp_path, "past_onset", sim, s0)
+    sim.run(2000)
+    sp = contact_state(sim)
+    sim.run(1000)
+    paths = write_anatomy_vtk(tmp_path, "past_onset", sim, s0, sp)
     assert [os.path.basename(p) for p in paths] == ["disks_past_onset.vtu", "contacts_past_onset.vtu"]
     assert sorted(os.listdir(tmp_path)) == ["contacts_past_onset.vtu", "disks_past_onset.vtu"]
     d = meshio.read(paths[0])
@@ -479,9 +567,21 @@ def test_the_vtu_files_read_back(sample300, tmp_path):
     assert np.array_equal(cd["sliding"][cd["present"] == 1], s.sliding[now])
     assert np.allclose(cd["force"][cd["present"] == 1],
                        np.hypot(s.force[now, 0], s.force[now, 1]), rtol=1e-12)
+    # the increment (sp to now): its own W2 and clusters on the contacts at 0 or now
+    inc = own_work(sp, s)
+    lab, sizes = unstable_clusters(inc.keys, inc.w2 < 0, sim.n)
+    at = {int(k): a for a, k in enumerate(inc.keys)}
+    exp_w2 = [inc.w2[at[int(k)]] if int(k) in at else 0.0 for k in ow.keys[grain]]
+    exp_lab = [lab[at[int(k)]] if int(k) in at else -1 for k in ow.keys[grain]]
+    assert np.array_equal(cd["w2_increment"], exp_w2)
+    assert np.array_equal(cd["cluster"], exp_lab)
+    assert (cd["cluster"] == 0).sum() <= sizes[0] and (cd["cluster"] == 0).sum() > 0
+    assert not np.array_equal(np.sign(cd["w2_increment"]), cd["w2_sign"])
+    # without the increment: the clusters of the secant since 0, w2_increment 0
+    write_anatomy_vtk(tmp_path / "s", "since0", sim, s0)
+    c = {k: v[0] for k, v in meshio.read(tmp_path / "s" / "contacts_since0.vtu").cell_data.items()}
     label, sizes = unstable_clusters(ow.keys, ow.w2 < 0, sim.n)
-    assert np.array_equal(cd["cluster"], label[grain])
-    assert (cd["cluster"] == 0).sum() == sizes[0]
+    assert np.array_equal(c["cluster"], label[grain]) and not c["w2_increment"].any()
     # a tag that is not a file name part is refused before anything is written
     with pytest.raises(ValueError, match="tag="):
         write_anatomy_vtk(tmp_path / "sub", "../x", sim, s0)
@@ -495,7 +595,7 @@ def test_the_figure(sample300, tmp_path):
     a = Simulation(sim.state())
     sim.run(2000)
     path = tmp_path / "anatomy.png"
-    plot_anatomy(path, [("below", a, s0), ("past", sim, s0)])
+    plot_anatomy(path, [("below", a, s0), ("past", sim, s0, contact_state(a))])
     with open(path, "rb") as f:
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
     assert os.listdir(tmp_path) == ["anatomy.png"]

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from dem import io, kernels
-from dem.burst import (BurstOptions, below_row, contact_table, contact_work, hold, scan_peak,
-                       wall_work)
+from dem.anatomy import contact_state, contact_work
+from dem.burst import BurstOptions, below_row, hold, scan_peak, wall_work
 from dem.probes import state_fingerprint
 from dem.simulation import Simulation
 from dem.threads import ThreadChooser
@@ -116,21 +116,26 @@ def test_the_contact_sum_is_the_walls_less_the_unbalanced_term(small_sample):
     # open and close (a c-controlled run with a 5 kPa step)
     sim = _sim(small_sample)
 
-    def net(s):
-        sn = s.snapshot()
-        return kernels.net_forces(s.n, s.x, sn.ci, sn.cj, sn.fx, sn.fy, sn.wp, sn.ww, sn.wf)
+    # (the contact states of dem.anatomy are taken at the last step's positions, x - dt v; the
+    # walls' and the unbalanced terms here at the present ones: the same identity holds at any
+    # one configuration, so the snapshots below are the states' own positions)
+    def at(s):
+        st = contact_state(s)
+        sn = kernels.contact_snapshot(st.x, s.r, s.pairs.pi, s.pairs.pj, s.pairs.ft, st.walls,
+                                      s.params.kn)
+        ci, cj, fx, fy, _, wp, ww, wf = sn
+        return (st, np.bincount(ww, weights=wf, minlength=4), st.walls.copy(), st.x.copy(),
+                kernels.net_forces(s.n, st.x, ci, cj, fx, fy, wp, ww, wf))
 
-    snap = sim.snapshot()
-    t0 = contact_table(sim)
-    g0, walls0, x0, f0 = (np.bincount(snap.ww, weights=snap.wf, minlength=4), sim.walls.copy(),
-                          sim.x.copy(), net(sim))
+    s0, g0, walls0, x0, f0 = at(sim)
     c = _c(sim) + 5e3
     sim.set_control(tied(R, c, c, sim.step, 0, sim.ref_len))
     sim.run(4000)
-    t1 = contact_table(sim)
-    assert len(np.setxor1d(t0.keys, t1.keys)) > 0            # contacts changed
-    cw, ww = contact_work(t0, t1), wall_work(sim, g0, walls0)
-    unb = float(np.sum((net(sim) - f0) * (sim.x - x0)))
+    s1, g1, walls1, x1, f1 = at(sim)
+    assert len(np.setxor1d(s0.keys, s1.keys)) > 0            # contacts changed
+    cw = contact_work(s0, s1)
+    ww = float(np.sum((g1 - g0) * (walls1 - walls0) * np.array([1.0, -1.0, 1.0, -1.0])))
+    unb = float(np.sum((f1 - f0) * (x1 - x0)))
     assert abs(cw) > 1e-3
     assert abs(cw - (ww - unb)) <= 1e-10 * (abs(cw) + abs(ww) + abs(unb))
 
@@ -207,3 +212,51 @@ def test_the_tied_control_does_not_depend_on_the_thread_split(small_sample):
         runs.append(sim.state())
     a, b = runs
     assert all(np.array_equal(x, y) for x, y in zip(a[1:15], b[1:15]))
+
+
+# -- the theory's verdict on a staircase (dem.burst.theory_verdict): hand-made sequences ------
+def _eqs(ks, c0=60e3, step=2e3):
+    return [(f"e{i}", c0 + i * step, 1e-3 + i * 1e-5, k) for i, k in enumerate(ks)]
+
+
+def test_verdict_passes_where_k_path_turns_before_the_failing_holds():
+    from dem.burst import theory_verdict
+    eqs = _eqs([5e7, 3e7, 1e7, -5e7])
+    v = theory_verdict(eqs, [("e3", 2000.0), ("e3", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "passes", v
+    # k = 0 between e2 (1e7) and e3 (-5e7): 1/6 of the way, in c and in eps1
+    assert v["c_cross"] == pytest.approx(64e3 + 2e3 / 6, rel=1e-12)
+    assert v["eps1_cross"] == pytest.approx(1e-3 + 2e-5 + 1e-5 / 6, rel=1e-12)
+    assert v["overshoot_c"] == pytest.approx(66e3 - v["c_cross"], rel=1e-12)
+    assert v["c_cross_band"][0] < v["c_cross"] < v["c_cross_band"][1]
+    assert v["k_path_ratio"] == -1.0 and v["c_peak_rest"] == 66e3
+    assert v["finite_step_failures"] == 0          # the 2 kPa step failed where k <= 0
+
+
+def test_a_positive_k_path_within_the_noise_does_not_move_the_crossing():
+    # the 4000-disk pattern: clearly negative, a small positive one within the noise, negative
+    from dem.burst import theory_verdict
+    v = theory_verdict(_eqs([5e7, 3e7, -2e7, 1e6, -5e8]), [("e4", 100.0)], 4e6, 100.0)
+    assert v["verdict"] == "passes"
+    assert v["c_cross"] == pytest.approx(62e3 + 2e3 * 3 / 5, rel=1e-12)   # between e1 and e2
+    assert v["overshoot_c"] == pytest.approx(68e3 - v["c_cross"], rel=1e-12)
+
+
+def test_verdict_contradicted_and_the_cases_without_one():
+    from dem.burst import theory_verdict
+    # a hold of +dc failed from an equilibrium where k_path is clearly positive
+    v = theory_verdict(_eqs([5e7, 3e7, 2e7]), [("e2", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "contradicted" and "clearly positive" in v["why"]
+    assert math.isnan(v["c_cross"])
+    # a larger step from a clearly positive k_path: counted apart, not against the theory
+    v = theory_verdict(_eqs([5e7, 3e7, -2e7]), [("e1", 2000.0), ("e2", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "passes" and v["finite_step_failures"] == 1
+    # no hold of +dc failed; a missing k_path; no noise
+    assert theory_verdict(_eqs([5e7, -3e7]), [("e1", 500.0)], 1e6, 100.0)["verdict"] == "no verdict"
+    assert theory_verdict(_eqs([5e7, math.nan]), [("e1", 100.0)], 1e6, 100.0)["verdict"] == \
+        "no verdict"
+    assert theory_verdict(_eqs([5e7, -3e7]), [("e1", 100.0)], math.nan, 100.0)["verdict"] == \
+        "no verdict"
+    # k_path within the noise already at the start: no crossing located, the verdict stands
+    v = theory_verdict(_eqs([1e6, -3e7]), [("e1", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "passes" and math.isnan(v["c_cross"]) and "first" in v["why"]

@@ -608,10 +608,13 @@ def test_sigterm_stops_the_worker_processes_without_waiting_for_their_runs(tmp_p
     import signal
     from tests._interrupt import interrupt_after
     out = tmp_path / "cal"
+    # runs to 20 % strain (a minute each, which SIGTERM cuts short); the signal goes once both
+    # workers' runs are under way (each has written its run_biaxial checkpoint), not after a delay
     argv = ["dem", "calibrate", "--out", str(out), "--n", "400", "--rate", "0.02",
-            "--eps-max", "0.02", "--post-peak-strain", "0.005", "--vary", "kn_over_d",
+            "--eps-max", "0.2", "--post-peak-strain", "0.15", "--vary", "kn_over_d",
             "--initial", "3", "--max-evals", "4", "--workers", "2"]
-    rc, err = interrupt_after(argv, "[calibrate] start:", sig=signal.SIGTERM, delay=3.0)
+    under_way = lambda: len(list((out / "work").glob("*/checkpoint.npz"))) == 2
+    rc, err = interrupt_after(argv, "[calibrate] start:", sig=signal.SIGTERM, until=under_way)
     assert rc == 143, err
     assert err[-1].startswith("interrupted (SIGTERM) during dem calibrate, start batch"), err
     work = out / "work"

@@ -18,7 +18,7 @@ from fem.dynamics import HISTORY_COLUMNS
 from fem.reference import material_point_curve, material_point_path
 from hmodel import HParams
 from hmodel.burst_rule import RELEASE, BurstRule, decide
-from tests._interrupt import interrupt_after
+from tests._interrupt import HANG_S, interrupt_after
 
 SMALL = ["--nx", "1", "--ny", "2", "--n-dir", "36"]
 SMALL_CFG = BiaxialConfig(nx=1, ny=2, n_dir=36, fields=False)
@@ -326,8 +326,9 @@ def test_config_validate_names_the_option():
 def test_sigterm_is_one_line_and_exit_143(tmp_path):
     """Interrupted in the dynamics: one line, exit 143, the rows so far whole and readable."""
     out = tmp_path / "run"
-    rc, lines = interrupt_after(["fem", "burst", *SMALL, "--out", str(out)],
-                                "R = -2, f = 0.9, below: step")
+    # 2000 steps a period: the dynamics that the signal cuts would take minutes
+    rc, lines = interrupt_after(["fem", "burst", *SMALL, "--steps-per-period", "2000", "--out",
+                                 str(out)], "R = -2, f = 0.9, below: step")
     assert rc == 143
     assert len(lines) == 1 and lines[0].startswith("interrupted (SIGTERM) during R = -2"), lines
     paths = _rows(out / "paths.csv")
@@ -353,7 +354,7 @@ def test_bit_identical_for_any_thread_count(tmp_path):
         env = dict(os.environ, NUMBA_NUM_THREADS=n)
         subprocess.run([sys.executable, "-m", "fem", "burst", "--nx", "4", "--ny", "8", "--n-dir",
                         "36", "--no-fields", "--quiet", "--out", str(out)], check=True, env=env,
-                       capture_output=True, timeout=600)
+                       capture_output=True, timeout=HANG_S)
         outs.append(out)
     for f in ("history.csv", "paths.csv"):
         assert (outs[0] / f).read_bytes() == (outs[1] / f).read_bytes(), f

@@ -6,6 +6,7 @@ import numpy as np
 
 from fem.__main__ import main
 from fem.output import read_curve
+from tests._interrupt import HANG_S
 
 
 def test_cli_small_run(tmp_path, capsys):
@@ -30,5 +31,5 @@ def test_cli_bad_option_exit_code(tmp_path, capsys):
 
 def test_module_entry_point_help():
     r = subprocess.run([sys.executable, "-m", "fem", "biaxial", "--help"], capture_output=True,
-                       text=True, timeout=120)
+                       text=True, timeout=HANG_S)
     assert r.returncode == 0 and "--eps1-max" in r.stdout and "--n-dir" in r.stdout

@@ -130,6 +130,7 @@ import numpy as np
 sys.path.insert(0, {str(__import__('pathlib').Path(__file__).parents[2])!r})
 from tests.fem.test_output import _fields, _mesh
 from fem.output import FieldWriter
+from tests._interrupt import HANG_S
 w = FieldWriter({str(tmp_path / 'f.xdmf')!r}, *_mesh(), xml_every=0.0)
 for k in range(2):
     w.write(0.1 * k, *_fields(k=k))
@@ -138,7 +139,7 @@ for k in range(2, 5):
     w.write(0.1 * k, *_fields(k=k))
 os.kill(os.getpid(), signal.SIGKILL)
 """
-    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=HANG_S)
     assert p.returncode == -9, p.stderr
     st = _steps(tmp_path / "f.xdmf")
     assert [t for t, _, _ in st] == [0.0, 0.1]

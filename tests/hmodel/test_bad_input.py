@@ -17,7 +17,7 @@ from hmodel.io import write_csv
 from hmodel.material import take_points
 from hmodel.params import ParamError
 from hmodel.options import announce_compilation
-from tests._interrupt import interrupt_after
+from tests._interrupt import HANG_S, interrupt_after
 
 
 def _refused(capsys, argv, *needles):
@@ -249,7 +249,7 @@ def test_a_signal_inside_numbas_callback_is_still_one_line(sig, name, code):
     import subprocess
     import sys
     p = subprocess.run([sys.executable, "-c", _SIGNAL_IN_NUMBA_CALLBACK, str(int(sig))],
-                       capture_output=True, text=True, timeout=120,
+                       capture_output=True, text=True, timeout=HANG_S,
                        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert p.returncode == code, p.stderr
     assert p.stderr.strip() == f"interrupted ({name}) during the loop; no output written yet"

@@ -506,3 +506,21 @@ def test_energy_release_of_a_spring_from_rest():
         energy_release([0.0], [0.0], [0.0], multiple=1.0)
     r = energy_release([0.0, 1.0], [0.0, 0.0], [0.0, 0.0])         # dG = 0: nothing put in
     assert math.isnan(r["ratio_max"]) and not r["released"]
+
+
+def test_path_stiffness_from_the_tangent_follows_c_and_vanishes_at_its_peak(params, start90,
+                                                                            path_R2):
+    """hmodel.burst.path_stiffness: the same states as the path (c to round-off of the update),
+    each increment's c change equal to k_path d eps1 to O(d eps1^2) (the tangent of the
+    increment against its secant: bound 2 % of the largest |dc| plus the second difference),
+    and k_path > 0 before the c peak, <= 0 from the step that passes it."""
+    from hmodel.burst import path_stiffness
+    p, c_path, pk = path_R2
+    n = len(c_path) - 1
+    assert n > pk.peak + 1
+    c, k = path_stiffness(start90, params, -2.0, 1e-5, n)
+    assert np.allclose(c, c_path[:n], rtol=0, atol=1e-9 * abs(c_path).max())
+    dc = np.diff(c_path[:n + 1])
+    curv = np.abs(np.diff(dc)).max()
+    assert np.abs(dc - k * 1e-5).max() <= 0.02 * np.abs(dc).max() + curv
+    assert np.all(k[:pk.peak - 1] > 0) and np.all(k[pk.peak:] <= 0)

@@ -1109,8 +1109,8 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
                             row = next(x for x in rows if x["switch"] == sw and
                                        (x["ratio"], x["start_fraction"]) == (r, f))
                             panels.append((f"{sw}: {res.holds[i][3].outcome}, at the {when} "
-                                           f"(t = {t:.3g} s); baseline (no change of load): "
-                                           f"at most {row['unstable_noise_max']:.0f} unstable",
+                                           f"(t = {t:.3g} s)\nheld with no change of load: "
+                                           f"<= {row['unstable_noise_max']:.0f} unstable",
                                            sim, s0, sp))
         for path in j.files() + [os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz")
                                  for i in range(2)]:

@@ -108,6 +108,18 @@ def test_c_held_by_the_servo_or_a_dead_load_on_a_stable_state(small_sample, how)
     assert h[-1, 6] <= opts.stress_tol
     de1, de2 = h[-1, 2] - h[0, 2], h[-1, 3] - h[0, 3]
     assert de1 > 0 and abs(de2 - R * de1) < 1e-6 * abs(de1)      # the tie kept (round-off: above)
+    # the anatomy of the last check is that of the increment from the state UNSTABLE_WINDOW
+    # checks back (kept as end_prev_state, which the burst's figures and VTU files use)
+    from dem.anatomy import (UNSTABLE_TAU, UNSTABLE_WINDOW, anatomy, contact_state,
+                             energy_scale)
+    from dem.burst import H
+    s0 = contact_state(Simulation(small_sample))
+    end, prev = Simulation(res.end_state), Simulation(res.end_prev_state)
+    assert end.step - prev.step == UNSTABLE_WINDOW * opts.check_every
+    a = anatomy(s0, contact_state(end), end.n, contact_state(prev),
+                UNSTABLE_TAU * energy_scale(s0, end.params.kn))
+    for k in ("n_unstable_raw", "n_unstable", "n_clusters", "largest_cluster", "contacts_lost"):
+        assert h[-1, H[k]] == a[k], k
 
 
 def test_the_contact_sum_is_the_walls_less_the_unbalanced_term(small_sample):

@@ -421,8 +421,8 @@ def burst_report_lines(c: dict, fig: str | None, fig_eq1: str | None = None,
     und = sum(d["undecided"] for p in c["parts"].values() for d in p["paths"])
     why = {"hmodel": "failure came at the c peak of the static path, where W2 of the path vanishes",
            "fem": "failure came at the c peak of the static path, where W2 of the path vanishes",
-           "dem": "and the kinematic probes at rest put W2 of the path <= 0 where the holds of "
-                  "+dc failed: the theory's verdict passes"}
+           "dem": "its kinematic probes at rest put W2 of the path <= 0 where its holds of +dc "
+                  "failed (the theory's verdict passes)"}
     s = ("**Where failure came.** " + "; ".join(
         f"{LABEL[n]}: " + (f"below settled without releasing energy and past released it on "
                            f"every path that peaked: {why[n]}" if ok else

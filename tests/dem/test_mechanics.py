@@ -269,14 +269,17 @@ def _stick_state(m_a, i_a, m_b, i_b, r_a, r_b, v0, w0):
 
 def _run_to_stick(sim, nmax, ledger=None):
     """Step one at a time until the slip velocity v_t = v_B - v_A - r_A w_A - r_B w_B changes
-    sign (at most ``nmax`` steps). Returns the history (one row per step: the time at the step's
-    half, w_A, w_B, v_A, v_B along y at the half step, y_B - y_A, the tangential force of the
-    step and the A-B overlap before it), the state at v_t = 0 interpolated between the last two
-    steps (the same columns), the stick's step (None if the slip never stopped) and, with a
-    ledger, its record at the first step with v_t of the new sign."""
+    sign, the stick, then on until the tangential force changes sign, its release (at most
+    ``nmax`` steps in all). Returns the history (one row per step: the time of the step's half
+    velocities, w_A, w_B, v_A, v_B along y at the half step, y_B - y_A, the tangential force of
+    the step and the A-B overlap before it), the state at v_t = 0 interpolated between the two
+    steps around it (the same columns), the stick's step (None if the slip never stopped), with a
+    ledger its record at the first step past the stick, and the time when the tangential force
+    goes through 0 after the stick (interpolated; the force of step n acts at n dt; None if it
+    stayed at the cap)."""
     r_a, r_b = sim.r
     rows, vt = [], []
-    sign0 = None
+    sign0 = stick = k_stick = rec = None
     for step in range(nmax):
         ov = r_a + r_b - float(np.hypot(*(sim.x[1] - sim.x[0])))
         sim.run(1)
@@ -285,11 +288,34 @@ def _run_to_stick(sim, nmax, ledger=None):
                      sim.pairs.ft[0], ov))
         vt.append(v[1, 1] - v[0, 1] - r_a * w[0] - r_b * w[1])
         sign0 = sign0 or np.sign(vt[0])
-        if np.sign(vt[-1]) != sign0:
-            h = np.array(rows)
+        if stick is None and np.sign(vt[-1]) != sign0:
             a = vt[-2] / (vt[-2] - vt[-1])
-            return h, h[-2] + a * (h[-1] - h[-2]), step, (ledger.read() if ledger else None)
-    return np.array(rows), None, None, None
+            stick = np.array(rows[-2]) + a * (np.array(rows[-1]) - np.array(rows[-2]))
+            k_stick = step
+            rec = ledger.read() if ledger else None
+        elif stick is not None and np.sign(rows[-1][6]) != np.sign(rows[k_stick][6]):
+            f0, f1 = rows[-2][6], rows[-1][6]
+            return (np.array(rows), stick, k_stick, rec, (step - 1 + f0 / (f0 - f1)) * sim.dt)
+    return np.array(rows), stick, k_stick, rec, None
+
+
+def _assert_it_sticks(h, stick, t_release, k_slip):
+    """At v_t = 0 the contact must stick: from there it is a linear spring between the slip
+    mode's inertia 1 / K and kt, holding the capped force, so f_t = -mu f_n cos(omega t') with
+    omega = sqrt(kt K), t' the time since the stick: the force leaves the cap and goes through 0
+    a quarter period pi / (2 omega) later (a contact that kept sliding would hold it at the cap;
+    with another inertia omega would change: by sqrt(4/3) for I = m r^2). ``k_slip`` = kt K
+    [1/s^2] from the test's m and I. Tolerance 1 % of the quarter period: the stick is
+    interpolated between half steps, the force's zero between whole ones (half a step is 0.5 %
+    of the quarter period, 99 steps here; 140 for the plane); the leapfrog's frequency error
+    (omega dt)^2 / 24 is 1e-5. Measured within 5e-4."""
+    quarter = math.pi / (2 * math.sqrt(k_slip))
+    assert t_release is not None, (
+        f"the contact kept sliding after v_t = 0: the tangential force stayed at {h[-1, 6]:.6g} N "
+        f"for {(h[-1, 0] - stick[0]) / quarter:.1f} quarter periods of the stuck spring")
+    got = (t_release - stick[0]) / quarter
+    assert abs(got - 1) <= 0.01, (f"the stuck contact's force went through 0 after {got:.4f} "
+                                  f"quarter periods pi / (2 sqrt(kt K)) of the stuck spring, not 1")
 
 
 def test_spinning_disk_against_a_squeezed_neighbour_sticks_at_two_thirds_of_its_spin():
@@ -306,7 +332,8 @@ def test_spinning_disk_against_a_squeezed_neighbour_sticks_at_two_thirds_of_its_
     m, inertia = _mass(p, RA)
     fn, mu = KN * delta, p.mu
     t_slide = RA * w0 * m / (6 * mu * fn)
-    h, stick, step, _ = _run_to_stick(sim, int(3 * t_slide / sim.dt))
+    k_slip = p.kt * (2 / m + 2 * RA ** 2 / inertia)       # kt K, K = 3 / m* = 6 / m
+    h, stick, step, _, t_rel = _run_to_stick(sim, int((3 * t_slide + 4 / k_slip ** 0.5) / sim.dt))
     assert step is not None, (f"the contact never stopped slipping in 3 T: w_A {h[-1, 1] / w0:.4f}"
                               f" w0, w_B {h[-1, 2] / w0:.4f} w0 (analytic stick 2/3, -1/3)")
     theta = abs(stick[5]) / (2 * RA)
@@ -333,6 +360,7 @@ def test_spinning_disk_against_a_squeezed_neighbour_sticks_at_two_thirds_of_its_
         assert abs(got / want - 1) <= tol_s, (f"sliding: {name} = {got:.6g} m/s^2, analytic "
                                               f"{want:.6g} (f_n = kn delta, I = m r^2 / 2)")
     assert abs(stick[6]) == pytest.approx(mu * fn, rel=1e-3)      # at the cap until the stick
+    _assert_it_sticks(h, stick, t_rel, k_slip)
 
 
 @pytest.mark.parametrize("r_b, v0, delta", [(RA, 0.25, 1e-6), (30 * RA, 0.33, 1e-6)],
@@ -350,7 +378,8 @@ def test_disk_sliding_along_another_reaches_rolling_at_the_analytic_speed(r_b, v
     ms = m_a * m_b / (m_a + m_b)
     mu = p.mu
     t_slide = v0 * ms / (3 * mu * KN * delta)
-    h, stick, step, _ = _run_to_stick(sim, int(3 * t_slide / sim.dt))
+    k_slip = p.kt * (1 / m_a + 1 / m_b + RA ** 2 / i_a + r_b ** 2 / i_b)
+    h, stick, step, _, t_rel = _run_to_stick(sim, int((3 * t_slide + 4 / k_slip ** 0.5) / sim.dt))
     assert step is not None, (f"the contact never stopped slipping in 3 T: v_A {h[-1, 3] / v0:.4f}"
                               f" v0, r_A w_A {h[-1, 1] * RA / v0:.4f} v0")
     theta = abs(stick[5]) / (RA + r_b)
@@ -373,6 +402,7 @@ def test_disk_sliding_along_another_reaches_rolling_at_the_analytic_speed(r_b, v
         # mass of B offsets by m_A / (3 (m_A + m_B)) and twice that (3.7e-4, 7.4e-4 of v0)
         assert abs(stick[3] / v0 - 2 / 3) <= m_a / s
         assert abs(stick[1] * RA / v0 + 2 / 3) <= m_a / s
+    _assert_it_sticks(h, stick, t_rel, k_slip)
 
 
 def test_split_of_the_spinning_pair_and_its_dissipation():
@@ -392,7 +422,7 @@ def test_split_of_the_spinning_pair_and_its_dissipation():
     fn, mu = KN * delta, p.mu
     led = Ledger(sim)
     t_slide = RA * w0 * m / (6 * mu * fn)
-    h, stick, step, rec = _run_to_stick(sim, int(3 * t_slide / sim.dt), ledger=led)
+    h, stick, step, rec, _ = _run_to_stick(sim, int(3 * t_slide / sim.dt), ledger=led)
     if rec is None:
         rec = led.read()
     split = rec.w_int - (rec.e_elastic - led.e_el0) - rec.d_slip

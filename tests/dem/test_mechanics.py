@@ -189,6 +189,7 @@ def test_every_contact_is_listed_and_the_forces_are_brute_force_while_disks_move
     sim.set_control(strain_rate(-10.0, 10.0, sim.ref_len))
     x0, n0, skin = sim.x.copy(), sim.n_rebuilds, sim.params.skin
     worst = dict(err_f=0.0, err_t=0.0, err_w=0.0)
+    what = dict(err_f="net forces", err_t="torques", err_w="wall forces")
     spin_weight, contacts = [], []
     for check in range(400):
         if check == 200:
@@ -200,7 +201,7 @@ def test_every_contact_is_listed_and_the_forces_are_brute_force_while_disks_move
         assert not c["missing_walls"], (f"step {sim.step}: (disk, wall) contacts missing from "
                                         f"the wall candidates: {c['missing_walls']}")
         for k in worst:
-            assert c[k] <= FORCE_TOL, (f"step {sim.step}: the kernel's {k[4:]} differs from the "
+            assert c[k] <= FORCE_TOL, (f"step {sim.step}: the kernel's {what[k]} differ from the "
                                        f"brute force by {c[k]:.3e} of the largest contact force")
             worst[k] = max(worst[k], c[k])
         spin_weight.append(c["spin_weight"])
@@ -252,9 +253,11 @@ def test_the_brute_force_check_sees_a_pair_and_a_wall_contact_left_out(small_sam
     assert in_list.all()
     i, j = pairs[len(pairs) // 2]
     k = int(np.flatnonzero((pl.pi == i) & (pl.pj == j))[0])
-    wi = 0
-    a = int(pl.cand_off[wi])                # the left wall's first candidate, touching it
-    assert sim.r[pl.cand[a]] - (sim.x[pl.cand[a], 0] - sim.walls[0]) > 0
+    wi = 0                                  # the left wall's first candidate touching it
+    cand0 = pl.cand[pl.cand_off[wi]:pl.cand_off[wi + 1]]
+    touching = np.flatnonzero(sim.r[cand0] - (sim.x[cand0, 0] - sim.walls[0]) > 0)
+    assert len(touching), "no disk touches the left wall"
+    a = int(pl.cand_off[wi] + touching[0])
     cand = np.delete(pl.cand, a)
     off = pl.cand_off.copy()
     off[wi + 1:] -= 1

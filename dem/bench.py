@@ -161,7 +161,7 @@ def write_lammps(state, out_dir, steps):
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "sample.data"), "w") as f:
         f.write("\n".join(lines) + "\n")
-    mu = math.tan(math.radians(p.friction_deg))
+    mu = math.tan(math.radians(p.phi_g))
     inp = f"""# dem bench sample in LAMMPS: same contact law, masses, inertia, dt and skin
 units si
 dimension 2

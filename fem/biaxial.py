@@ -89,23 +89,23 @@ class BiaxialConfig:
 
         def count(v, lo):
             return isinstance(v, int) and not isinstance(v, bool) and v >= lo
-        checks = (("width", real(self.width) and self.width > 0, "width > 0 [m]"),
-                  ("height", real(self.height) and self.height > 0, "height > 0 [m]"),
-                  ("nx", count(self.nx, 1), "an integer >= 1"),
-                  ("ny", count(self.ny, 1), "an integer >= 1"),
+        checks = (("width", real(self.width) and self.width > 0, "value > 0 [m]"),
+                  ("height", real(self.height) and self.height > 0, "value > 0 [m]"),
+                  ("nx", count(self.nx, 1), "an integer value >= 1"),
+                  ("ny", count(self.ny, 1), "an integer value >= 1"),
                   ("mesh_kind", self.mesh_kind in ("quad", "tri"), "quad or tri"),
                   ("eps1_max", real(self.eps1_max) and 0 < self.eps1_max < 0.5,
-                   "0 < eps1_max < 0.5"),
-                  ("d_eps1", real(self.d_eps1) and 0 < self.d_eps1 < 0.05, "0 < d_eps1 < 0.05"),
+                   "0 < value < 0.5"),
+                  ("d_eps1", real(self.d_eps1) and 0 < self.d_eps1 < 0.05, "0 < value < 0.05"),
                   ("imperfection", self.imperfection in (None, "none", "spot", "band"),
                    "none, spot or band"),
                   ("imp_size", real(self.imp_size) and 0 < self.imp_size <= 1,
-                   "0 < size <= 1 (a fraction of the width)"),
-                  ("imp_angle", real(self.imp_angle), "a finite angle [deg]"),
-                  ("rtol", real(self.rtol) and 0 < self.rtol < 1, "0 < rtol < 1"),
-                  ("max_iter", count(self.max_iter, 1), "an integer >= 1"),
-                  ("max_cutbacks", count(self.max_cutbacks, 0), "an integer >= 0"),
-                  ("n_sphere", count(self.n_sphere, 1), "an integer >= 1"))
+                   "0 < value <= 1 (a fraction of the width)"),
+                  ("imp_angle", real(self.imp_angle), "a finite value [deg]"),
+                  ("rtol", real(self.rtol) and 0 < self.rtol < 1, "0 < value < 1"),
+                  ("max_iter", count(self.max_iter, 1), "an integer value >= 1"),
+                  ("max_cutbacks", count(self.max_cutbacks, 0), "an integer value >= 0"),
+                  ("n_sphere", count(self.n_sphere, 1), "an integer value >= 1"))
         for name, ok, allowed in checks:
             if not ok:
                 raise ValueError(f"{name} = {getattr(self, name)!r} is out of range: allowed "

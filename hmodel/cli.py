@@ -386,8 +386,8 @@ def build_parser() -> argparse.ArgumentParser:
         default_text="x/100 to x*100 of the start for kn, kt, r_g, p0; phi_g 2:60; alpha0 31:70")
     add(f, "--starts", 8)
     add(f, "--seed", 0, note="of the starts")
-    add(f, "--sigma2", record="HParams",
-        default_text="the median of the data's column s2 or sigma2")
+    add(f, "--sigma2", note="the data's", default_text="the median of the data's column s2 or "
+        "sigma2")
     add(f, "--w-epsv", 1.0)
     add(f, "--d-eps1", 1e-5, note="of the final fit")
     add(f, "--d-eps1-search", 1e-4)

@@ -716,11 +716,25 @@ class Stage:
         if self.written:
             done = f"complete in {self.out_dir}: {', '.join(self.written)}"
         else:
-            new = self.changed()
-            shown = ", ".join(new[:8]) + (f" and {len(new) - 8} more" if len(new) > 8 else "")
+            new = _grouped(self.changed())
+            shown = ", ".join(new[:12]) + (f" and {len(new) - 12} more" if len(new) > 12 else "")
             done = f"written so far in {self.out_dir}: {shown}" if new else "no output written yet"
         where = self.where() if callable(self.where) else self.where
         return f"interrupted ({signame}) during {where}; {done}"
+
+
+def _grouped(paths) -> list:
+    """The files of a folder as a line names them: its own files, then each sub-folder as
+    "states/ (6 files)" (or its one file's path)."""
+    top, sub = [], {}
+    for p in paths:
+        head, _, rest = p.partition(os.sep)
+        if rest:
+            sub.setdefault(head, []).append(p)
+        else:
+            top.append(p)
+    return top + [v[0] if len(v) == 1 else f"{k}{os.sep} ({len(v)} files)"
+                  for k, v in sorted(sub.items())]
 
 
 # -- whose folder: every command that writes a folder records itself there -------------------

@@ -261,7 +261,7 @@ def cmd_calibrate(a):
     s = run_calibration(a.out, _params(a), a.vary, bounds=a.bounds, target=a.target,
                         seeds=a.seeds, check_seeds=a.check_seeds, initial=a.initial,
                         batch=a.batch, max_evals=a.max_evals, rate=a.rate,
-                        confining=a.confining, eps_max=a.eps_max,
+                        confining=a.sigma2, eps_max=a.eps1_max,
                         post_peak_strain=a.post_peak_strain, smooth=a.smooth,
                         workers=a.workers, scheduler=a.scheduler, resume=a.resume,
                         stage=getattr(a, "stage", None), params_note=a.params_note,

@@ -531,6 +531,8 @@ def main(argv=None):
             opt.check_out_file(a.out)
         elif hasattr(a, "out"):
             opt.check_out_dir(a.out)
+        if getattr(a, "cache", None):
+            opt.check_out_dir(a.cache, "--cache")
         # a bad parameter file or option is refused before the compilation
         from .params import load_params
         if hasattr(a, "kn_over_d"):          # a command of add_param_options

@@ -147,6 +147,8 @@ def check_config(cfg: BiaxialConfig) -> None:
         except ValueError as e:
             raise opt.OptionError(f"--imperfection {cfg.imperfection}: {e}") from None
     if cfg.mesh_file:
+        opt.check_file(cfg.mesh_file, "--mesh-file", "a triangle or quadrilateral mesh file "
+                       "meshio can read")
         try:
             mesh = from_file(cfg.mesh_file)
         except ValueError as e:

@@ -1,7 +1,21 @@
-"""What the hmodel and fem command lines share: one-line errors, checked option types, output
-folders and memory checked before any computation, Ctrl-C / SIGTERM as one line, and the model
-parameters of a command (``add_param_options``, ``params_from``, ``record_params``: --params FILE
-with the options on top, docs/parameters.md).
+"""What the hmodel, fem and dem command lines share: one vocabulary of options, one-line errors,
+checked option types, output folders and memory checked before any computation, Ctrl-C /
+SIGTERM as one line, and the model parameters of a command (``add_param_options``,
+``params_from``, ``record_params``: --params FILE with the options on top, docs/parameters.md).
+
+The vocabulary (``VOCABULARY``, issue 32) is written once: every option of the three parts, by
+name, with the quantity it is (in the paper's symbols), its unit, its kind and the range the
+parser checks, the record fields that check it where a command binds it to its record
+(``HParams``, ``DemParams``, ``BurstOptions``, ``ProbeOptions``, ``BiaxialConfig``,
+``BurstConfig``, ``Specimen``, ``Dynamics``: their validation gives the range, once; the
+command names the option with ``record_error``), and its former names (refused with "did you
+mean" the new one). The parsers are built from it (``add``), so that every help says what the
+value is, its unit and its default.
+
+The rule of --out: required by every command that writes (a folder; the file of ``params``):
+a newcomer sees where a run goes, and no two commands share a default folder. The folder
+records the command that wrote it (command.json, ``mark_owner``); another command refuses it
+before writing anything (``check_owner``, exit 2) unless --force.
 
 The rule (both CLIs): every option is validated before anything is computed or written; a bad
 one gives one line ``error: ...`` naming the option and its allowed range on stderr and exit
@@ -221,8 +235,7 @@ _T = Term
 # Every option of python -m hmodel, fem and dem, once (the parsers are built from it: ``add``).
 VOCABULARY = {t.name: t for t in (
     # -- where a command reads and writes, how it runs ----------------------------------------
-    _T("--out", "output folder (created); one command's: another command's folder is refused "
-       "unless --force", None, "path"),
+    _T("--out", "where the command writes", None, "path"),
     _T("--force", "write into a folder another command wrote (its files of the same names are "
        "replaced)", None, "flag"),
     _T("--params", "parameter file (JSON; docs/parameters.md)", None, "path"),
@@ -553,9 +566,11 @@ def add_out(ap, what="folder"):
     output folder records the command that wrote it); ``what`` "folder" (with --force) or
     "file" (the parameter file of ``params``)."""
     if what == "file":
-        return add(ap, "--out", required=True, note="here the parameter file (JSON) to write",
+        return add(ap, "--out", required=True, note="the parameter file (JSON) to write",
                    metavar="FILE")
-    add(ap, "--out", required=True, metavar="DIR")
+    add(ap, "--out", required=True, metavar="DIR", note="a folder (created) that records the "
+        "command that wrote it (command.json); another command's folder is refused unless "
+        "--force")
     add(ap, "--force")
 
 

@@ -178,8 +178,9 @@ def migrate(d: dict) -> dict:
 
 def _options():
     from hmodel.options import VOCABULARY
-    return {t.name: f.split(".", 1)[1] for t in VOCABULARY.values() for f in t.fields
-            if f.startswith("DemParams.")}
+    found = {f.split(".", 1)[1]: t.name for t in VOCABULARY.values() for f in t.fields
+             if f.startswith("DemParams.")}
+    return {found[f.name]: f.name for f in fields(DemParams) if f.name in found}
 
 
 # The command-line options of the main parameters: option -> field of DemParams (the terms of

@@ -360,7 +360,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "burst of kinetic energy (docs/burst.md)")
     opt.add_out(u)
     add(u, "--ratios", [-1.0, -1.5, -2.0, -3.0], parse=_arg(_check_ratios))
-    add(u, "--start-fractions", [0.90, 0.95], note="each < 1 here (a state below the peak)")
+    add(u, "--start-fractions", [0.90, 0.95], note="f < 1 here (a state below the drained peak)")
     add(u, "--dc", default_text="1e-4 sigma2, as fem burst")
     add(u, "--sigma2", record="HParams", default_text=p0)
     add(u, "--d-eps1", 1e-5, note="to the start states")

@@ -37,6 +37,7 @@ from fem.dynamics import Tie, TiedStatic, hold, lowest_mode, mass_matrix   # noq
 from fem.reference import material_point_curve                    # noqa: E402
 from fem.solver import LoadStepper                                # noqa: E402
 from hmodel.experiment import compile_kernels                     # noqa: E402
+from hmodel.burst_rule import check_columns                        # noqa: E402
 
 
 class Timed:
@@ -128,8 +129,9 @@ def main(argv=None):
           f"{(t_dy / max(dy[3], 1)) / (t_sp / max(ps[3], 1)):.2f} per material call "
           f"({dy[3] / n_dy:.2f} against {ps[3] / ps[0]:.2f} material calls a step)")
     print(f"dynamic step / drained static step: {(t_dy / n_dy) / (t_dr / dr[0]):.2f}; "
-          f"outcome after {n_dy} steps: {r.outcome}; max balance residual "
-          f"{r.history['balance_residual'].max():.2e}")
+          f"outcome after {n_dy} steps: {r.outcome}; Newmark's balance (the Newton residual's "
+          f"work) at most {r.history['newton_work'].max():.2e}, energy check "
+          f"{check_columns(r.history)['energy_check']:.2e}")
     print(f"peak memory (max RSS) {rss:.0f} MB; load average {load1[0]:.2f} at the end")
 
 

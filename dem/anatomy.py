@@ -556,6 +556,8 @@ def plot_anatomy(path, panels, dpi=150):
             q = ax.quiver(cx, cy, mv[:, :, 0], mv[:, :, 1], angles="xy", scale_units="xy",
                           scale=ref / (0.9 * cell), width=0.003, zorder=4,
                           color=np.where(clip, "C1", "k").ravel().tolist())
+            q.set_clip_on(True)           # an arrow at the box's edge stays in its own panel
+            q.set_clip_box(ax.bbox)
             key = float(f"{ref:.1g}")
             ax.quiverkey(q, 0.45, -0.025, key, f"{key:g} m/s",
                          labelpos="E", coordinates="axes", fontproperties={"size": 7})
@@ -563,16 +565,16 @@ def plot_anatomy(path, panels, dpi=150):
         ax.set_ylim(wl[2] - 0.02 * (wl[3] - wl[2]), wl[3] + 0.02 * (wl[3] - wl[2]))
         ax.set_aspect("equal")
         ax.set_axis_off()
-        over = (f"< -{UNSTABLE_TAU:g} fn^2/kn over the last increment" if s_prev is not None
+        over = (f"< -{UNSTABLE_TAU:.0e} fn²/kn (last increment)" if s_prev is not None
                 else "< 0 since 0")
-        ax.set_title(f"{title}\n{a['n_unstable']} contacts with w2 {over} of {len(ow.keys)}; "
-                     f"{a['n_clusters']} clusters, largest {a['largest_cluster']}\n"
-                     f"sliding {100 * a['sliding_share']:.1f} %, z = {a['coordination']:.2f}, "
-                     f"W2_int (secant) = {a['w2_int_secant']:.3g} J", fontsize=8)
+        ax.set_title(f"{title}\nunstable (w2 {over}): {a['n_unstable']} of {len(ow.keys)}\n"
+                     f"{a['n_clusters']} clusters, largest {a['largest_cluster']}; sliding "
+                     f"{100 * a['sliding_share']:.1f} %, z = {a['coordination']:.2f}\n"
+                     f"W2_int (secant since 0) = {a['w2_int_secant']:.3g} J", fontsize=7.5)
     ax = axes[0][0]
-    ax.plot([], [], "-", color="0.55", lw=0.6, label="contact, own W2 > 0")
-    ax.plot([], [], "-", color="C3", lw=1.1, label="own W2 < 0")
-    ax.plot([], [], "-", color="navy", lw=2.0, label="largest cluster of W2 < 0")
+    ax.plot([], [], "-", color="0.55", lw=0.6, label="contact, stable")
+    ax.plot([], [], "-", color="C3", lw=1.1, label="unstable: own W2 below the threshold")
+    ax.plot([], [], "-", color="navy", lw=2.0, label="largest cluster of unstable contacts")
     ax.plot([], [], "k>", ms=5, label="velocity less the walls' affine field (backbone, cell means)")
     ax.plot([], [], ">", color="C1", ms=5, label="... shortened to 2.5 cells")
     fig.legend(loc="outside lower center", ncol=4, fontsize=7, frameon=False)

@@ -142,7 +142,9 @@ def settle(sim, target_xy, rule: SettleRule, eps0=None, de_elastic=None, strain_
     from collections import deque
 
     from .anatomy import UNSTABLE_TAU, UNSTABLE_WINDOW, energy_scale
-    window = deque([contacts0], maxlen=UNSTABLE_WINDOW + 1) if contacts0 is not None else None
+    # before a check appends its state, window[0] is the state UNSTABLE_WINDOW checks back (the
+    # start for the first ones): the increment of ``dem.burst.hold``'s onset and end states too
+    window = deque([contacts0], maxlen=UNSTABLE_WINDOW) if contacts0 is not None else None
     tau = UNSTABLE_TAU * energy_scale(contacts0, sim.params.kn) if contacts0 is not None else 0.0
     target = None if stress_error else np.asarray(target_xy, float)
     e = lambda: sim.strain()[::-1]                      # (eps1, eps2) = (y, x)

@@ -318,16 +318,20 @@ def _run_burst(args, stage) -> int:
 
 
 def format_burst(rows) -> str:
-    """The table of the runs: the c peak (FE, material point), the switch and the outcome."""
+    """The table of the runs: the c peak (FE, material point), the switch, the outcome and the
+    growth measure (``hmodel.burst_rule.energy_release``: the largest (E_c - E_c(0)) / W2_ext
+    and the time it passed RELEASE x W2_ext, 'never' when it did not), the energy check."""
+    from hmodel.io import fmt
     lines = ["    R      f  switch  eta_switch  c_switch [kPa]  c_peak FE / MP [kPa]  "
-             "eta_peak FE / MP   outcome      E_c growth  t_end/T1  balance"]
+             "eta_peak FE / MP   outcome        max (E_c-E_c0)/W2_ext  t_release/T1  t_end/T1  "
+             "energy check"]
     for r in rows:
         lines.append(f"{r['ratio']:5g} {r['start_fraction']:6g}  {r['switch']:6s}  "
                      f"{r['eta_switch']:10.4f}  {r['c_switch'] / 1e3:14.3f}  "
                      f"{r['c_peak'] / 1e3:9.3f} / {r['mp_c_peak'] / 1e3:9.3f}  "
-                     f"{r['eta_peak_c']:7.4f} / {r['mp_eta_peak_c']:7.4f}  {r['outcome']:11s}  "
-                     f"{r['ke_growth']:10.3g}  {r['t_end'] / r['t1']:8.1f}  "
-                     f"{r['energy_residual']:.1e}")
+                     f"{r['eta_peak_c']:7.4f} / {r['mp_eta_peak_c']:7.4f}  {r['outcome']:13s}  "
+                     f"{fmt(r['ke_w2ext_max'], '21.3g')}  {fmt(r['t_release_t1'], '12.2f', 'never')}"
+                     f"  {r['t_end'] / r['t1']:8.1f}  {r['energy_check']:.1e}")
     return "\n".join(lines)
 
 

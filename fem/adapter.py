@@ -26,7 +26,7 @@ import numpy as np
 from hmodel import HParams, broadcast_state, _kernels
 from hmodel.driver import isotropic_state
 from hmodel.material import (HState, PARALLEL_MIN_POINTS, check_state, kernel_args, to_voigt,
-                             from_voigt, _material_args, _refuse_non_finite)
+                             from_voigt, stress_work, _material_args, _refuse_non_finite)
 
 __all__ = ["strain_to_model", "stress_to_fe", "tangent_to_fe", "MaterialField", "Trial"]
 
@@ -214,6 +214,17 @@ class MaterialField:
                     V0=np.array(st.V0, dtype=float), sliding=out[10], is_open=out[11],
                     params_key=st.params_key)
         return ns, sig, tan
+
+    def stress_work(self, new_states, ref_states, weights: np.ndarray) -> float:
+        """sum_p weights_p ((s_p + s'_p) / 2 - s0_p) : (e'_p - e_p) [J/m for weights dx in
+        m^2, per unit thickness]: the internal second-order work of the increment from the
+        committed states (stress s, strain e) to ``new_states`` (a trial's), s0 the stress of
+        ``ref_states``, from the material's own stress and strain records
+        (``hmodel.material.stress_work``), not from nodal forces. weights : (npts,)."""
+        w = np.asarray(weights, float)
+        return float(sum(np.sum(w[idx] * stress_work(old, new, ref.stress))
+                         for (_, idx), old, new, ref in zip(self.groups, self.states, new_states,
+                                                            ref_states)))
 
     def fractions(self) -> tuple:
         """(sliding, opened): (npts,) fractions of the hexagons of each point that slid / are open

@@ -9,17 +9,22 @@
    recorded until it has peaked (``hmodel.burst.CPeak``) or the path strain;
 3. from the ``below`` and ``past`` switch states, at rest, G held at G_switch + dG
    (``fem.dynamics.hold``, Newmark average acceleration, Rayleigh mass damping), the outcome by
-   ``hmodel.burst_rule.decide``;
+   ``hmodel.burst_rule.decide`` ('not_converged' when a time step converges at no substep),
+   the growth measure by ``hmodel.burst_rule.energy_release`` (the largest (E_c - E_c(0)) /
+   W2_ext and when it passed RELEASE), the energy check (``hmodel.burst_rule.EnergyCheck``);
 4. beside it, the material point on the same path with the same steps
    (``fem.reference.material_point_path``): the c peak the perfect specimen must reproduce.
 
 Outputs in ``out_dir`` (docs/burst.md, docs/fem.md): burst.csv (a row per run), history.csv
 (every time step of every run), paths.csv (the quasi-static paths, FE and material point),
-fields.xdmf + fields.h5 (the first ``past`` run: displacement, velocity, the mode), ke.png,
-balance.png, path.png, mode_*.png (the collapse mode of each failure run), summary.json.
+fields.xdmf + fields.h5 (the first ``past`` run: displacement, velocity, the mode), ke.png
+(E_c and the energy release), balance.png (Newmark's balance, the energy check), path.png,
+mode_*.png (the collapse mode of each failure run), summary.json. ``limit_bracket``: the dc
+scan of the past switch (statics against dynamics).
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -29,7 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hmodel.burst_rule import BurstRule, ke_growth
+from hmodel.burst_rule import (RELEASE, BurstRule, check_columns, ke_growth, release_columns,
+                               release_ratio)
 from hmodel.io import atomic_write_bytes, fmt, save_figure
 from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
@@ -41,7 +47,7 @@ from .reference import material_point_curve, material_point_path
 from .solver import LoadStepper, StaticLoss
 
 __all__ = ["BurstConfig", "run_burst", "BurstResult", "BURST_COLUMNS", "PATH_COLUMNS",
-           "DRAINED_EPS1_MAX"]
+           "DRAINED_EPS1_MAX", "limit_bracket"]
 
 # the drained FE path gives up here if a start state is not reached [-]
 DRAINED_EPS1_MAX = 0.1
@@ -49,12 +55,13 @@ DRAINED_EPS1_MAX = 0.1
 MP_EPS1_MAX = 0.05
 
 BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction_peak_c",
-                 "eps1_peak_c", "c_start", "c_peak", "c_switch", "switch", "dc", "outcome",
+                 "eps1_peak_c", "c_start", "c_peak", "c_switch", "switch", "dc", "dc_rule",
+                 "outcome", "ke_w2ext_max", "t_release", "t_release_t1", "released",
                  "ke_growth", "ke_max", "w2_ext_end", "w2_int_end", "t_end", "steps",
-                 "energy_residual", "eq1_residual", "t1", "dt", "eps1_switch", "eta_switch",
-                 "mp_c_peak", "mp_eta_peak_c", "c_peak_error", "eta_peak_error",
-                 "mode_band_share", "band_area_share", "mode_nonuniform", "newton_iters_mean",
-                 "seconds"]
+                 "newton_work", "newton_work_sum", "energy_check", "work_check", "t1", "dt",
+                 "eps1_switch", "eta_switch", "mp_c_peak", "mp_eta_peak_c", "c_peak_error",
+                 "eta_peak_error", "mode_band_share", "band_area_share", "mode_nonuniform",
+                 "newton_iters_mean", "seconds", "failure_reason"]
 PATH_COLUMNS = ["ratio", "start_fraction", "source", "step", "eps1", "eps2", "s1", "s2", "p",
                 "q", "eta", "c"]
 
@@ -221,34 +228,8 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
     try:
         # 1. the drained FE path to every start state
         t0 = time.perf_counter()
-        fractions = sorted(set(float(f) for f in cfg.start_fractions))
-        starts = {}
-        stepper = LoadStepper(prob, sc.d_eps1, rtol=sc.rtol, max_iter=sc.max_iter,
-                              max_cutbacks=sc.max_cutbacks)
-        last = {}
-
-        def on_drained(res, info):
-            row = _averages(prob, res.trial.sigma, stepper.u)
-            last.update(row, step=stepper.step)
-            for f in fractions:
-                if f not in starts and row["eta"] >= f * eta_peak:
-                    starts[f] = Snapshot(stepper.u.copy(), list(prob.material.states),
-                                         res.f_int.copy(), dict(row, step=stepper.step))
-                    say(f"drained path: start state f = {f:g} at step {stepper.step}, eps1 = "
-                        f"{100 * row['eps1']:.4f} %, eta = {row['eta']:.4f} (target "
-                        f"{f * eta_peak:.4f})")
-
-        lost = ""
-        try:
-            stepper.run(DRAINED_EPS1_MAX, on_drained, until=lambda: len(starts) == len(fractions))
-        except StaticLoss as e:
-            lost = f"; the drained path has no static state beyond: {e}"
+        starts = _drained_starts(prob, cfg, eta_peak, say)
         timings["drained"] += time.perf_counter() - t0
-        missing = [f for f in fractions if f not in starts]
-        if missing:
-            raise RuntimeError(f"start fraction(s) {missing} not reached on the FE drained path "
-                               f"by eps1 = {DRAINED_EPS1_MAX} (largest eta {last.get('eta', 0):.4f}"
-                               f", material point peak {eta_peak:.4f}){lost}")
 
         for f in cfg.start_fractions:
             start = starts[float(f)]
@@ -307,28 +288,32 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                     h = res.history
                     share, area, nonuniform = (_mode_measures(prob, float(R), res.v)
                                                if res.outcome == "failure" else (math.nan,) * 3)
-                    row = dict(base, switch=name, dc=dc_run, c_switch=snap.row["c"],
-                               outcome=res.outcome,
+                    row = dict(base, switch=name, dc=dc_run, dc_rule=path["cpeak"].missed(),
+                               c_switch=snap.row["c"], outcome=res.outcome,
+                               **release_columns(h["t"], h["ke"], h["w2_ext"], t1),
                                ke_growth=ke_growth(h["ke"]), ke_max=float(h["ke"].max()),
                                w2_ext_end=h["w2_ext"][-1], w2_int_end=h["w2_int"][-1],
                                t_end=h["t"][-1], steps=int(h["step"][-1]),
-                               energy_residual=float(h["balance_residual"].max()),
-                               eq1_residual=float(h["eq1_residual"].max()), t1=t1, dt=res.dt,
+                               newton_work=float(h["newton_work"].max()),
+                               newton_work_sum=float(h["newton_work_sum"].max()),
+                               **check_columns(h), t1=t1, dt=res.dt,
                                eps1_switch=snap.row["eps1"], eta_switch=snap.row["eta"],
                                mode_band_share=share, band_area_share=area,
                                mode_nonuniform=nonuniform,
                                newton_iters_mean=float(h["newton_iters"][1:].mean())
                                if len(h["t"]) > 1 else 0.0,
-                               seconds=res.seconds, time_steps_cut=res.cut_steps,
-                               failure_reason=res.failure, path_end=path["end"])
+                               seconds=res.seconds, failure_reason=res.failure_reason,
+                               time_steps_cut=res.cut_steps, path_end=path["end"])
                     rows.append(row)
                     runs.append((tag, res))
                     if burst_w is not None:
                         burst_w.write(row)
                     say(f"{_label(tag)}: {res.outcome} after {row['steps']} steps "
-                        f"({row['t_end'] / t1:.1f} T1, T1 = {1e3 * t1:.4f} ms), E_c growth "
-                        f"{row['ke_growth']:.3g}, max balance residual {row['energy_residual']:.2e}"
-                        f", {res.seconds:.1f} s")
+                        f"({row['t_end'] / t1:.1f} T1, T1 = {1e3 * t1:.4f} ms), "
+                        + _release_text(row)
+                        + f"; energy check {row['energy_check']:.1e}, Newton's work "
+                        f"{row['newton_work']:.1e}, {res.seconds:.1f} s"
+                        + (f"; {res.failure_reason}" if res.failure_reason else ""))
     finally:
         for w in (hist_w, path_w, burst_w, fields):
             if w is not None:
@@ -349,6 +334,94 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
     return BurstResult(rows, paths, summary, out)
 
 
+def _drained_starts(prob, cfg: BurstConfig, eta_peak: float, say) -> dict:
+    """{f: Snapshot} of the drained FE path at each start fraction f of cfg (the first converged
+    step with eta >= f x ``eta_peak``, the material point's drained peak). RuntimeError when one
+    is not reached by DRAINED_EPS1_MAX."""
+    sc = cfg.specimen
+    fractions = sorted(set(float(f) for f in cfg.start_fractions))
+    starts = {}
+    stepper = LoadStepper(prob, sc.d_eps1, rtol=sc.rtol, max_iter=sc.max_iter,
+                          max_cutbacks=sc.max_cutbacks)
+    last = {}
+
+    def on_drained(res, info):
+        row = _averages(prob, res.trial.sigma, stepper.u)
+        last.update(row, step=stepper.step)
+        for f in fractions:
+            if f not in starts and row["eta"] >= f * eta_peak:
+                starts[f] = Snapshot(stepper.u.copy(), list(prob.material.states),
+                                     res.f_int.copy(), dict(row, step=stepper.step))
+                say(f"drained path: start state f = {f:g} at step {stepper.step}, eps1 = "
+                    f"{100 * row['eps1']:.4f} %, eta = {row['eta']:.4f} (target "
+                    f"{f * eta_peak:.4f})")
+
+    lost = ""
+    try:
+        stepper.run(DRAINED_EPS1_MAX, on_drained, until=lambda: len(starts) == len(fractions))
+    except StaticLoss as e:
+        lost = f"; the drained path has no static state beyond: {e}"
+    missing = [f for f in fractions if f not in starts]
+    if missing:
+        raise RuntimeError(f"start fraction(s) {missing} not reached on the FE drained path "
+                           f"by eps1 = {DRAINED_EPS1_MAX} (largest eta {last.get('eta', 0):.4f}"
+                           f", material point peak {eta_peak:.4f}){lost}")
+    return starts
+
+
+def limit_bracket(cfg: BurstConfig, tol: float = 1.0, progress=None) -> dict:
+    """Statics against dynamics (docs/burst.md): the dynamic limit load of the ``past`` switch,
+    bracketed. From the c peak that the path of the first ratio and start fraction of ``cfg``
+    samples in steps of cfg.path_d_eps1 (a static state, at rest), G held at B (c_peak + dc):
+    the largest dc that settles (``lo``) and the smallest that fails (``hi``), by bisection
+    from lo = 0 (the peak's own static state: nothing moves) and hi = the sizing rule's
+    ``dc_rule`` = c_peak - c_(peak - 1) (``hmodel.burst.CPeak.missed``: past the path's true
+    peak if c is concave there; doubled until a hold fails) down to hi - lo <= ``tol`` [Pa].
+    The true limit load lies in c_peak + [lo, hi]; the sampled peak misses it by at most
+    dc_rule, so the bracket shrinks with the path's step.
+
+    Returns {"c_peak" [Pa], "eta_peak", "dc_rule" [Pa], "lo" [Pa], "hi" [Pa], "runs": [(dc [Pa],
+    outcome, t_end / T1), ...] in the order run}. RuntimeError when the path does not peak or a
+    hold ends neither in equilibrium nor in failure (undecided, not converged: no bracket)."""
+    cfg.validate()
+    if not (math.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol = {tol!r} is out of range: allowed tol > 0 [Pa]")
+    say = progress or (lambda line: None)
+    sc = cfg.specimen
+    prob = build_problem(sc)
+    M = mass_matrix(prob, cfg.density)
+    mp_curve = material_point_curve(prob.params, MP_EPS1_MAX)
+    f, R = float(cfg.start_fractions[0]), float(cfg.ratios[0])
+    start = _drained_starts(prob, dataclasses.replace(cfg, start_fractions=(f,)),
+                            mp_curve["eta_peak"], say)[f]
+    path, switches = _tied_path(prob, start, R, cfg, say)
+    if path["peak"] is None:
+        raise RuntimeError(f"c does not peak within the path strain {cfg.path_strain} (R = {R:g}, "
+                           f"f = {f:g}): no limit load to bracket")
+    snap = dict(switches)["past"]
+    c_peak, rule = float(path["c"][path["peak"]]), path["cpeak"].missed()
+    runs = []
+
+    def fails(dc):
+        res, t1 = _held_run(prob, M, snap, R, prob.width * dc, cfg, cfg.rule,
+                            {"ratio": R, "start_fraction": f, "switch": "past"}, say, None, None)
+        runs.append((float(dc), res.outcome, float(res.history["t"][-1] / t1)))
+        say(f"limit bracket: c_peak + {dc:.4g} Pa: {res.outcome} at {runs[-1][2]:.1f} T1")
+        if res.outcome not in ("equilibrium", "failure"):
+            raise RuntimeError(f"the hold at c_peak + {dc:.6g} Pa ended {res.outcome} "
+                               f"{res.failure_reason}: no bracket")
+        return res.outcome == "failure"
+
+    lo, hi = 0.0, rule
+    while not fails(hi):
+        lo, hi = hi, 2.0 * hi
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if fails(mid) else (mid, hi)
+    return {"c_peak": c_peak, "eta_peak": float(path["eta"][path["peak"]]), "dc_rule": rule,
+            "lo": lo, "hi": hi, "runs": runs}
+
+
 def _json_default(v):
     if isinstance(v, (np.integer,)):
         return int(v)
@@ -357,6 +430,15 @@ def _json_default(v):
     if isinstance(v, np.ndarray):
         return v.tolist()
     return str(v)
+
+
+def _release_text(row: dict) -> str:
+    """The growth measure of a run in words (``hmodel.burst_rule.energy_release``)."""
+    if row["released"]:
+        return (f"E_c - E_c(0) passed {RELEASE:g} W2_ext at t = {row['t_release_t1']:.2f} T1 "
+                f"(largest {row['ke_w2ext_max']:.3g} W2_ext)")
+    return (f"E_c - E_c(0) stayed below {RELEASE:g} W2_ext (largest "
+            f"{fmt(row['ke_w2ext_max'], '.3g', 'none: dG = 0')} W2_ext)")
 
 
 def _label(tag: dict) -> str:
@@ -473,7 +555,7 @@ def _held_run(prob, M, snap: Snapshot, ratio: float, dG: float, cfg: BurstConfig
     sc = cfg.specimen
     res = hold(tie, M, snap.u, dG, t1, cfg.steps_per_period, cfg.damping_ratio, rule,
                eps_ref=(snap.row["eps1"], snap.row["eps2"]), rtol=sc.rtol, max_iter=sc.max_iter,
-               on_step=on_step)
+               on_step=on_step, density=cfg.density)
     return res, t1
 
 
@@ -495,7 +577,8 @@ def _frame(fields, prob, tie, u_ref, t, m, ratio):
 
 
 def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
-    """ke.png, balance.png, path.png and mode_*.png (see docs/fem.md)."""
+    """ke.png (E_c and the energy release), balance.png (Newmark's balance and the energy
+    check), path.png and mode_*.png (see docs/fem.md)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -511,8 +594,8 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
     starts = sorted({(tag["ratio"], tag["start_fraction"]) for tag, _ in runs})
     color = {s: f"C{i % 10}" for i, s in enumerate(starts)}
     style = {"below": "--", "past": "-"}
-    # E_c(t), log axis
-    fig, ax = plt.subplots(figsize=(7.5, 5))
+    # E_c(t) and the energy release r(t) = (E_c - E_c(0)) / W2_ext, log axes
+    fig, (ax, ar) = plt.subplots(1, 2, figsize=(13, 5))
     for tag, res in runs:
         h = res.history
         s = (tag["ratio"], tag["start_fraction"])
@@ -521,32 +604,60 @@ def _figures(out: Path, prob, paths, runs, rows, mp_curve) -> None:
         ax.semilogy(t, pos(h["ke"][1:]), style[tag["switch"]], color=color[s],
                     lw=1.3, label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}: {res.outcome} "
                                   f"(T1 = {1e3 * res.t1:.3f} ms)")
-        ax.plot(t[-1], h["ke"][-1], "x" if res.outcome == "failure" else "o", color=color[s],
-                mfc="none")
+        ax.plot(t[-1], h["ke"][-1], {"failure": "x", "not_converged": "D"}.get(res.outcome, "o"),
+                color=color[s], mfc="none")
         ax.semilogy(t, pos(h["w2_ext"][1:]), ":", color=color[s], lw=0.9,
                     label=r"$W_{2,ext} = dG\,\Delta U_1$ (Eq. 1: $E_c \leq W_{2,ext}$ while "
                           r"$W_{2,int} \geq 0$)" if (tag, res) == runs[0] else None)
+        r = release_ratio(h["ke"], h["w2_ext"])[1:]
+        ar.semilogy(h["t"][1:] / res.t1, pos(r), style[tag["switch"]], color=color[s], lw=1.3,
+                    label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}: {res.outcome}")
+        k = [row for tg, row in zip((tg for tg, _ in runs), rows) if tg == tag][0]
+        if k["released"]:
+            ar.plot(k["t_release_t1"], RELEASE, "*", color=color[s], ms=11, mfc="none",
+                    label=f"passes {RELEASE:g} at {k['t_release_t1']:.2f} T1")
+    ar.axhline(RELEASE, color="k", lw=0.9, ls="--",
+               label=f"RELEASE = {RELEASE:g}: the specimen gave back more than dG put in")
+    ar.axhline(1.0, color="0.5", lw=0.8, ls=":", label=r"1: $W_{2,int} = 0$ (Eq. 1, no damping)")
     if not any(np.any(res.history["ke"] > 0) for _, res in runs):
         ax.set_yscale("linear")                       # dc = 0: nothing moved, E_c = 0
+        ar.set_yscale("linear")
+    ar.set_xlabel("time since the switch t / T1 [-]")
+    ar.set_ylabel(r"energy release $(E_c - E_c(0)) / W_{2,ext}$ [-]")
+    ar.set_title("the growth measure (hmodel.burst_rule.energy_release):\nthe kinetic energy "
+                 "gained against the work of dG", fontsize=8)
+    ar.grid(alpha=0.3, which="both")
+    ar.legend(fontsize=7)
     finish(fig, ax, "time since the switch t [ms]",
            r"kinetic energy $E_c$ [J/m] (per unit thickness)",
-           "G held at G_switch + dG: kinetic energy (x: failure, o: equilibrium / undecided, by "
-           "hmodel.burst_rule); dotted: the work of dG", "ke.png")
-    # the energy balance residual per step
-    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+           "G held at G_switch + dG: kinetic energy; dotted: the work of dG\n(x: failure, o: "
+           "equilibrium / undecided, by hmodel.burst_rule; diamond: not converged)", "ke.png")
+    # Newmark's balance (the work of the Newton residual) and the energy check, per step
+    fig, (ax, ac) = plt.subplots(1, 2, figsize=(13, 4.5))
     for tag, res in runs:
         h = res.history
         s = (tag["ratio"], tag["start_fraction"])
-        ax.semilogy(h["step"][1:], np.where(h["balance_residual"][1:] > 0,
-                                            h["balance_residual"][1:], np.nan),
-                    style[tag["switch"]], color=color[s], lw=1,
-                    label=f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}")
+        lab = f"R = {s[0]:g}, f = {s[1]:g}, {tag['switch']}"
+        ax.semilogy(h["step"][1:], np.where(h["newton_work"][1:] > 0, h["newton_work"][1:],
+                                            np.nan),
+                    style[tag["switch"]], color=color[s], lw=1, label=lab)
+        run_scale = max(float(np.max(h["ke_mid"])), float(np.max(np.abs(h["w2_ext"]))),
+                        float(np.max(np.abs(h["w2_int_stress"]))), float(np.max(h["damping_mid"])))
+        e = np.abs(h["energy_check"][1:]) / run_scale if run_scale > 0 else h["energy_check"][1:]
+        ac.semilogy(h["t"][1:] / res.t1, np.where(e > 0, e, np.nan), style[tag["switch"]],
+                    color=color[s], lw=1, label=lab)
     ax.axhline(1e-6, color="k", lw=0.8, ls=":", label="1e-6")
+    ac.set_xlabel("time since the switch t / T1 [-]")
+    ac.set_ylabel(r"$|E_c^{mid} - (\Phi_n + \Phi_{n+1})/2|$ / the run's largest $W_2$ [-]")
+    ac.set_title("the energy check (O(dt$^2$)): $E_c$ of the velocity field with the density"
+                 "\n" r"against $\Phi = W_{2,ext} - W_{2,int}$(the stresses)$ - D$", fontsize=8)
+    ac.grid(alpha=0.3, which="both")
+    ac.legend(fontsize=7)
     finish(fig, ax, "time step since the switch",
            r"$|\Delta E_c - (\Delta W_{ext} - \Delta W_{int} - \Delta D)|$ / "
            r"max($E_c$, |$W_2$|, D) [-]",
-           "discrete energy balance of each step (Newmark average acceleration: exact up to the "
-           "Newton tolerance)", "balance.png")
+           "Newmark's own balance of each step: the work of the Newton residual\n(an identity "
+           "of the scheme for any M and f_int)", "balance.png")
     # c against eps1, FE and material point, peaks and switches marked
     fig, ax = plt.subplots(figsize=(7.5, 5))
     for s in starts:

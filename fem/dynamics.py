@@ -14,8 +14,10 @@ Kept apart, each with its own test (tests/fem/test_dynamics.py):
   with the consistent tangent, the material updated through its one contract (the total strain
   increment of the time step from the committed state, committed on convergence);
 * the run at a held force (``hold``): from a static state at rest, G_ext = G_switch + dG held,
-  every step recorded (energies of Eq. 1, the balance residual), the outcome decided by
-  ``hmodel.burst_rule.decide``.
+  every step recorded (energies of Eq. 1; Newmark's own balance, which measures the Newton
+  residual; the energy check from the material's stresses and the density, which Newmark
+  cannot satisfy by itself), the outcome decided by ``hmodel.burst_rule.decide``, a time step
+  that converges at no substep reported as 'not_converged'.
 
 Sign conventions: the FE is tension positive (fem.adapter); U1, G, c, eps1, eps2 are compression
 positive (docs/burst.md).
@@ -34,14 +36,14 @@ from skfem import Basis, BilinearForm
 from skfem.helpers import dot
 
 from hmodel.burst import Specimen
-from hmodel.burst_rule import BurstRule, decide
+from hmodel.burst_rule import BurstRule, EnergyCheck, decide
 from hmodel.driver import MAX_CUTS
 from .problem import Biaxial
 from .solver import FreeSolver, NewtonError
 
 __all__ = ["DENSITY", "mass_matrix", "generalized_mass", "Tie", "TiedStatic", "Newmark",
-           "Motion", "newmark_step", "TiedDynamics", "lowest_mode", "HoldResult", "hold",
-           "HISTORY_COLUMNS"]
+           "Motion", "newmark_step", "TiedDynamics", "lowest_mode", "field_kinetic_energy",
+           "HoldResult", "hold", "HISTORY_COLUMNS"]
 
 # dry granular bulk density [kg/m^3] (sand, 1500-1700): the material point's specimen's
 DENSITY = Specimen().density
@@ -314,17 +316,28 @@ def lowest_mode(K, M):
     return math.sqrt(lam.real), mode / np.max(np.abs(mode))
 
 
+def field_kinetic_energy(basis: Basis, v: np.ndarray, density: float) -> float:
+    """rho/2 int |v_h|^2 dA [J/m] (per unit thickness) of the nodal velocity ``v`` (ndofs,)
+    [m/s], v_h interpolated at the quadrature points of ``basis`` (the specimen's vector basis
+    with a rule exact for |v_h|^2: intorder 2). The field integrated with the density, not
+    v.M v / 2 with an assembled mass matrix: the kinetic energy of the energy check
+    (``hmodel.burst_rule.EnergyCheck``), which a wrong mass in the integrator must not share."""
+    vq = np.asarray(basis.interpolate(v))                           # (2, nel, nqp)
+    return 0.5 * float(density) * float(np.sum(np.sum(vq * vq, axis=0) * np.asarray(basis.dx)))
+
+
 HISTORY_COLUMNS = ["step", "t", "eps1", "eps2", "c", "G", "U1", "ke", "w_ext", "w_int",
-                   "damping", "w2_ext", "w2_int", "balance_residual", "eq1_residual", "u_norm",
-                   "newton_iters"]
+                   "damping", "w2_ext", "w2_int", "newton_work", "newton_work_sum", "ke_mid",
+                   "w2_int_stress", "damping_mid", "energy_check", "u_norm", "newton_iters"]
 
 
 class HoldResult(NamedTuple):
-    """A run at a held force: outcome ('equilibrium', 'failure', 'undecided'), the history
-    (HISTORY_COLUMNS -> (steps + 1,) arrays, row 0 the switch), the final displacement and
-    velocity (ndofs,) [m, m/s] (from the switch), T1 [s], dt [s], seconds; cut_steps: {step:
-    halvings} of the time steps run in substeps; failure: why the run ended as a failure when a
-    time step could not converge however cut ('' otherwise)."""
+    """A run at a held force: outcome (``hmodel.burst_rule.OUTCOMES``: 'equilibrium',
+    'failure', 'undecided' by the rule, 'not_converged' when a time step converged at no
+    substep), the history (HISTORY_COLUMNS -> (steps + 1,) arrays, row 0 the switch), the final
+    displacement and velocity (ndofs,) [m, m/s] (from the switch), T1 [s], dt [s], seconds;
+    cut_steps: {step: halvings} of the time steps run in substeps; failure_reason: what did not
+    converge when the outcome is 'not_converged' ('' for every other outcome)."""
 
     outcome: str
     history: dict
@@ -334,34 +347,50 @@ class HoldResult(NamedTuple):
     dt: float
     seconds: float
     cut_steps: dict = {}
-    failure: str = ""
+    failure_reason: str = ""
 
 
 def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_period: int = 20,
          damping_ratio: float = 0.05, rule: BurstRule = BurstRule(), eps_ref=(0.0, 0.0),
          scheme: Newmark = Newmark(), rtol: float = 1e-10, max_iter: int = 25,
-         on_step=None, max_steps: int | None = None) -> HoldResult:
+         on_step=None, max_steps: int | None = None, density: float = DENSITY) -> HoldResult:
     """From the committed material state of ``tie.prob`` at displacement ``u_ref``, at rest,
     hold the generalized force at G_switch + ``dG`` [N/m] (G_switch = a . f_int there) and
     integrate until ``decide`` gives an outcome (window rule.window_periods x T1) or the cap
-    (rule.max_periods x T1, or ``max_steps``): 'undecided'.
+    (rule.max_periods x T1, or ``max_steps``): 'undecided'; a time step that converges at no
+    substep (down to dt / 2**MAX_CUTS) ends the run as 'not_converged', what failed in
+    ``failure_reason`` (the integrator stopped, not the specimen: never a burst).
 
-    t1 : the lowest elastic period T1 [s] (``lowest_mode``); dt = T1 / steps_per_period; the
-    damping C = 2 zeta (2 pi / T1) M, zeta = ``damping_ratio``. eps_ref : (eps1, eps2) of the
-    switch (compression positive) for the recorded strains. ``on_step(step, motion, system,
-    row)`` at the switch (step 0) and after each step, ``row`` the step's history (a dict of
-    HISTORY_COLUMNS), e.g. to write it and the fields as the run goes. The material state is
-    committed step by step (the specimen ends in the run's last state).
+    mass : the (ndofs, ndofs) mass matrix the integrator uses [kg/m]; density [kg/m^3] : the
+    specimen's, for the energy check's kinetic energy (the velocity field integrated with it,
+    not with ``mass``). t1 : the lowest elastic period T1 [s] (``lowest_mode``); dt = T1 /
+    steps_per_period; the damping C = 2 zeta (2 pi / T1) M, zeta = ``damping_ratio``. eps_ref :
+    (eps1, eps2) of the switch (compression positive) for the recorded strains.
+    ``on_step(step, motion, system, row)`` at the switch (step 0) and after each step, ``row``
+    the step's history (a dict of HISTORY_COLUMNS), e.g. to write it and the fields as the run
+    goes. The material state is committed step by step (the specimen ends in the run's last
+    state).
 
     Every step records (HISTORY_COLUMNS): t [s]; eps1, eps2; c = G/B [Pa]; G = a . f_int [N/m];
-    U1 [m]; ke = v.M v/2; w_ext, w_int, damping: the trapezoidal work of f_ext, f_int and C v
-    over du [J/m] (a held force: w_ext = G_ext U1, up to the switch's Newton residual kept in
-    f_ext, see ``TiedDynamics.start``); w2_ext = sum du . (f_ext - f_ext(0)) = dG U1, w2_int =
-    sum du . ((f(n) + f(n+1))/2 - f(0)), f_ext(0) = f(0) the switch's (an equilibrium); the balance
-    residual of the step |dE_c - (dW_ext - dW_int - dD)| over the largest second-order energy
-    so far, max(E_c, |W2_ext|, |W2_int|, D) (the first-order work of the prestress, G_switch U1,
-    is orders larger and would hide any residual); the residual of Eq. 1 in second-order form,
-    |E_c - (W2_ext - W2_int - D)| on the same scale; u_norm = |u - u_ref| [m]; Newton iterations.
+    U1 [m]; the integrator's energies [J/m]: ke = v.M v / 2, w_ext, w_int, damping the
+    trapezoidal works of f_ext, f_int and C v over dz (a held force: w_ext = G_ext U1, up to the
+    switch's Newton residual kept in f_ext, see ``TiedDynamics.start``), w2_ext = sum dz .
+    (f_ext - f_ext(0)) = dG U1, w2_int = sum dz . ((f(n) + f(n+1))/2 - f(0)), f_ext(0) = f(0)
+    the switch's; newton_work, Newmark's balance of the step |dE_c - (dW_ext - dW_int - dD)|
+    over the largest second-order energy so far, max(E_c, |W2_ext|, |W2_int|, D) (the
+    first-order work of the prestress, G_switch U1, is orders larger and would hide any
+    residual): for the average-acceleration rule it equals |dz . (r(n) + r(n+1)) / 2| / scale,
+    r the Newton residual of the equation of motion, for any symmetric M and any f_int: the work
+    of the Newton residual, nothing about the mass or the forces; newton_work_sum, |E_c -
+    (W2_ext - W2_int - D)| on the same scale, the same residuals' work summed since the switch
+    (f_ext(0) = f(0) cancels); the energy check that the scheme cannot satisfy by itself
+    (``hmodel.burst_rule.EnergyCheck``): ke_mid, E_c at the step's midpoint of the velocity
+    field T dz / dt integrated with ``density`` (``field_kinetic_energy``), w2_int_stress, W2_int
+    from the quadrature points' stresses and the material's own strain increments
+    (``MaterialField.stress_work``, weights dx), damping_mid, the damping's work 2 alpha ke_mid
+    dt, and energy_check, ke_mid - the mean of W2_ext - w2_int_stress - damping_mid at the
+    step's ends [J/m] (O(dt^2) on a healthy run; ``check_columns`` makes it relative); u_norm =
+    |u - u_ref| [m]; Newton iterations.
     """
     if not (isinstance(steps_per_period, (int, np.integer)) and steps_per_period >= 10):
         raise ValueError(f"steps_per_period = {steps_per_period!r} is out of range: allowed an "
@@ -371,6 +400,8 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
                          "0 <= zeta < 1")
     if not (math.isfinite(dG) and dG >= 0):
         raise ValueError(f"dG = {dG!r} is out of range: allowed dG >= 0 [N/m]")
+    if not (math.isfinite(density) and density > 0):
+        raise ValueError(f"density = {density!r} is out of range: allowed density > 0 [kg/m^3]")
     t0 = time.perf_counter()
     prob = tie.prob
     B, H, R = prob.width, prob.height, tie.ratio
@@ -385,6 +416,12 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
     g_sw = float(f0[-1])
     M = system.M
     n = tie.size
+    # the energy check's own ingredients: the material's states at the switch, the quadrature
+    # weights of its points, the basis of the velocity field (a rule exact for |v_h|^2)
+    ref_states = list(prob.material.states)
+    weights = prob.dx.reshape(-1)
+    field_basis = Basis(prob.mesh, prob.element, intorder=2)
+    check = EnergyCheck(alpha)
     # at rest: M a0 = f_ext - f(0) = (0, ..., dG)
     z0 = np.zeros(n)
     a0 = spla.splu(M.tocsc()).solve(system.f_ext - f0)
@@ -403,14 +440,15 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
 
     if on_step is not None:
         on_step(0, m, system, row(0))
-    cut_steps, failure = {}, ""
+    cut_steps, why = {}, ""
     floor = 0.5 ** MAX_CUTS
     while k < n_cap:
         # the time step, whole or (its Newton failing) in substeps: halves, growing back x2 after
         # each success, down to dt / 2**MAX_CUTS; each substep Newmark's own, committed, so the
         # step's works are the sums of its substeps' and the balance stays exact
         frac, hs, depth, iters = 0.0, 1.0, 0, 0
-        d_ext = d_int = d_damp = d_w2e = d_f0 = 0.0
+        d_ext = d_int = d_damp = d_w2e = d_f0 = d_wis = 0.0
+        worst = ke_mid = 0.0
         while frac < 1.0:
             hs = min(hs, 1.0 - frac)
             try:
@@ -420,24 +458,31 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
                     hs *= 0.5
                     depth += 1
                     continue
-                failure = (f"time step {k + 1} did not converge even in substeps of dt / "
-                           f"2**{MAX_CUTS} ({e}): the specimen's motion outran the integrator")
+                why = (f"time step {k + 1} did not converge even in substeps of dt / "
+                       f"2**{MAX_CUTS} ({e})")
                 break
-            system.commit(m1.z, trial)
             dz = m1.z - m.z
+            # the energy check, before the commit (the committed states are the step's start)
+            dwis = prob.material.stress_work(trial.states, ref_states, weights)
+            ke_mid = field_kinetic_energy(field_basis, tie.displacement(dz) / (hs * dt),
+                                          density)
+            res = check.step(hs * dt, ke_mid, float(dz @ (system.f_ext - f_ext0)), dwis)
+            worst = res if abs(res) > abs(worst) else worst
+            system.commit(m1.z, trial)
             d_ext += float(dz @ system.f_ext)
             d_int += 0.5 * float(dz @ (m.f + m1.f))
             d_damp += 0.5 * alpha * float(dz @ (M @ (m.v + m1.v)))
             d_w2e += float(dz @ (system.f_ext - f_ext0))
             d_f0 += float(dz @ f0)
+            d_wis += dwis
             iters += it
             m = m1
             frac += hs
             hs *= 2.0
-        if depth or failure:
-            cut_steps[k + 1] = MAX_CUTS if failure else depth
-        if failure and frac == 0.0:
-            outcome = "failure"
+        if depth or why:
+            cut_steps[k + 1] = MAX_CUTS if why else depth
+        if why and frac == 0.0:
+            outcome = "not_converged"
             break
         ke1 = 0.5 * float(m.v @ (M @ m.v))
         k += 1
@@ -457,14 +502,18 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
         scale = max(scale, ke1, abs(h["w2_ext"][k]), abs(h["w2_int"][k]), h["damping"][k])
         res = (ke1 - h["ke"][k - 1]) - (d_ext - d_int - d_damp)
         eq1 = ke1 - (h["w2_ext"][k] - h["w2_int"][k] - h["damping"][k])
-        h["balance_residual"][k] = abs(res) / scale if scale > 0 else 0.0
-        h["eq1_residual"][k] = abs(eq1) / scale if scale > 0 else 0.0
+        h["newton_work"][k] = abs(res) / scale if scale > 0 else 0.0
+        h["newton_work_sum"][k] = abs(eq1) / scale if scale > 0 else 0.0
+        h["ke_mid"][k] = ke_mid
+        h["w2_int_stress"][k] = h["w2_int_stress"][k - 1] + d_wis
+        h["damping_mid"][k] = check.damping
+        h["energy_check"][k] = worst
         h["u_norm"][k] = float(np.linalg.norm(tie.displacement(m.z)))
         h["newton_iters"][k] = iters
         if on_step is not None:
             on_step(k, m, system, row(k))
-        if failure:
-            outcome = "failure"
+        if why:
+            outcome = "not_converged"
             break
         s = slice(0, k + 1)
         outcome = decide(h["t"][s], h["ke"][s], h["w2_ext"][s], h["eps1"][s], window, rule)
@@ -472,4 +521,4 @@ def hold(tie: Tie, mass, u_ref: np.ndarray, dG: float, t1: float, steps_per_peri
             break
     history = {key: v[:k + 1].copy() for key, v in h.items()}
     return HoldResult(outcome or "undecided", history, tie.displacement(m.z),
-                      tie.displacement(m.v), t1, dt, time.perf_counter() - t0, cut_steps, failure)
+                      tie.displacement(m.v), t1, dt, time.perf_counter() - t0, cut_steps, why)

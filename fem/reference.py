@@ -88,11 +88,13 @@ def material_point_path(params: HParams, eta_start: float, ratio: float, d_eps1:
     strain since the start is ``path_strain``.
 
     Returns rows of the path (row 0 the start): eps1, eps2 (since the isotropic state), s1, s2,
-    p, q, eta, c [Pa], and peak (row of the c peak or None), below (row of the below switch)."""
+    p, q, eta, c [Pa], and peak (row of the c peak or None), below (row of the below switch),
+    cpeak (the ``CPeak``: e.g. its sizing rule ``missed``)."""
     drained, state = state_at_eta(params, eta_start, d_eps1=d_eps1)
     r, peak = proportional_path(state, params, ratio, path_d_eps1, path_strain)
     p, q, eta = stress_invariants(r.sigma)
     e0 = drained.eps[-1]
     return {"eps1": e0[0] + r.eps[:, 0], "eps2": e0[1] + r.eps[:, 1], "s1": r.sigma[:, 0],
             "s2": r.sigma[:, 1], "p": p, "q": q, "eta": eta,
-            "c": r.sigma[:, 0] + ratio * r.sigma[:, 1], "peak": peak.peak, "below": peak.below()}
+            "c": r.sigma[:, 0] + ratio * r.sigma[:, 1], "peak": peak.peak, "below": peak.below(),
+            "cpeak": peak}

@@ -15,8 +15,11 @@ the tie kept):
   (consistent mass m_G = rho B H (1/3 + R^2 B^2 / (12 H^2)) per unit thickness, internal force
   G = B c): m_G U1'' + C U1' + B c(U1) = G_switch + B dc, integrated by Newmark's average
   acceleration with mass-proportional damping C = 2 zeta omega_1 m_G (``hold``). The outcome is
-  decided by ``hmodel.burst_rule`` from E_c and W2_ext; W2_int, the damping work and the residual
-  of the discrete energy balance (exact for this integrator) are recorded at every step.
+  decided by ``hmodel.burst_rule`` from E_c and W2_ext ('not_converged' when a time step
+  converges at no substep), the growth measure is its ``energy_release``; W2_int, the damping
+  work, Newmark's own balance (the work of the Newton residual) and the energy check from the
+  material's stress and strain and the field's kinetic energy (``burst_rule.EnergyCheck``) are
+  recorded at every step.
 
 Functions here return arrays and write nothing (``hmodel.cli`` writes the files).
 """
@@ -28,12 +31,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .burst_rule import BurstRule, decide as decide_outcome, ke_growth
+from .burst_rule import (RELEASE, BurstRule, EnergyCheck, check_columns, decide as decide_outcome,
+                         ke_growth, release_columns)
 from .controllability import control_scan, decide, verdict_text
 from .driver import (MAX_CUTS, MixedControlError, PathResult, mixed_step, proportional_strain,
                      proportional_strain_stress, run_path, stress_invariants)
 from .experiment import DOMAIN_EPS1_MAX, biaxial_test, state_at_eta
-from .material import HState, to_voigt, update, update_full
+from .material import HState, stress_work, to_voigt, update, update_full
 from .params import HParams
 
 __all__ = ["check_ratio", "Specimen", "Dynamics", "PathInfo", "HoldResult", "conjugate_stress", "path_direction",
@@ -59,6 +63,20 @@ class Specimen(NamedTuple):
         rho int (eps1'^2 y^2 + eps2'^2 (x - B/2)^2) dA / 2 with eps2 = R eps1."""
         B, H = self.width, self.height
         return self.density * B * H * (1.0 / 3.0 + ratio ** 2 * B ** 2 / (12.0 * H ** 2))
+
+    def kinetic_energy(self, u1_rate: float, ratio: float) -> float:
+        """E_c [J/m] of the homogeneous velocity field along the tie at U1' = ``u1_rate`` [m/s]:
+        rho/2 int |u'|^2 dA over B x H, u' = (-eps2' (x - B/2), -eps1' y), eps1' = U1'/H,
+        eps2' = R eps1', by 2 x 2 Gauss-Legendre points (exact for the quadratic integrand).
+        The field integrated, not ``mass``: the energy check's kinetic energy
+        (``burst_rule.EnergyCheck``), which a wrong m_G in the integrator must not share."""
+        B, H = self.width, self.height
+        g = np.array([-1.0, 1.0]) / math.sqrt(3.0)
+        x, y = 0.5 * B * (g + 1.0), 0.5 * H * (g + 1.0)      # the points; weights B/2, H/2 each
+        e1 = float(u1_rate) / H
+        X, Y = np.meshgrid(x, y, indexing="ij")
+        v2 = (ratio * e1 * (X - 0.5 * B)) ** 2 + (e1 * Y) ** 2
+        return 0.5 * self.density * 0.25 * B * H * float(np.sum(v2))
 
     def validate(self):
         for name in ("width", "height", "density"):
@@ -165,6 +183,16 @@ class CPeak:
         th = self.c[0] + (BELOW_RISE if fraction is None else fraction) * (self.c[self.k_max] - self.c[0])
         return next(k for k, c in enumerate(self.c) if c >= th)
 
+    def missed(self) -> float:
+        """The sizing rule of dc [Pa] (docs/burst.md): how far above the sampled peak the path's
+        c can rise between two samples, at most the slope of the last step before the peak
+        times the step, c_peak - c_(peak - 1) (c concave near its peak: its slope beyond the
+        peak row is at most that secant). A ``past`` run held at c_peak + dc with dc above this
+        is past the path's true peak. nan without a confirmed peak after the start."""
+        if self.peak is None or self.k_max == 0:
+            return math.nan
+        return self.c[self.k_max] - self.c[self.k_max - 1]
+
     def dc_below(self, k: int, dc: float) -> float:
         """The step of c held by the run switched at row ``k`` below the peak: at most half of
         what is left of the rise, so that the held c stays below the peak (a larger one would
@@ -242,12 +270,16 @@ def static_check(state: HState, params: HParams, ratio: float, c_target: float,
 
 
 class HoldResult(NamedTuple):
-    """A run held at c_hold after the switch: outcome, lowest elastic period T1 [s], time step
-    [s], generalized mass [kg/m] and stiffness [N/m^2], and the history (dict of arrays, one row a
-    step, row 0 the switch): t [s], U1 [m], v [m/s], eps1, eps2 (from the start of the path), c
-    [Pa], G_int [N/m], ke, w_ext, w_int, w2_ext, w2_int, damping [J/m], energy_residual [-],
-    newton_iters. cut_steps: {step: halvings} of the steps run in substeps; failure: why the run
-    ended as a failure when a time step could not converge at all ('' otherwise)."""
+    """A run held at c_hold after the switch: outcome (``burst_rule.OUTCOMES``), lowest elastic
+    period T1 [s], time step [s], generalized mass [kg/m] and stiffness [N/m^2], and the history
+    (dict of arrays, one row a step, row 0 the switch; ``HISTORY_COLUMNS``): t [s], U1 [m], v
+    [m/s], eps1, eps2 (from the start of the path), c [Pa], G_int [N/m], ke, w_ext, w_int,
+    w2_ext, w2_int, damping [J/m] (the integrator's: E_c = m_G v^2 / 2, works of its forces),
+    newton_work [-] (Newmark's balance, the work of the Newton residual), the energy check's
+    ke_mid, w2_int_stress, damping_mid and its residual energy_check [J/m]
+    (``burst_rule.EnergyCheck``; ``check_columns`` makes them relative), newton_iters. cut_steps: {step: halvings} of the steps run in
+    substeps; failure_reason: what did not converge when the outcome is 'not_converged' ('' for
+    every other outcome)."""
 
     outcome: str
     T1: float
@@ -256,7 +288,7 @@ class HoldResult(NamedTuple):
     stiffness: float
     history: dict
     cut_steps: dict = {}
-    failure: str = ""
+    failure_reason: str = ""
 
 
 def _tie_response(state, params, ratio, x):
@@ -290,6 +322,11 @@ def elastic_stiffness(state: HState, params: HParams, ratio: float) -> float:
     return float(C[0, 0, 0, 0] + ratio * C[0, 0, 1, 1] + ratio * (C[1, 1, 0, 0] + ratio * C[1, 1, 1, 1]))
 
 
+# the history of ``hold``, one row a step (HoldResult)
+HOLD_COLUMNS = ("t", "U1", "v", "c", "ke", "w_ext", "w_int", "w2_ext", "w2_int", "damping",
+                "newton_work", "ke_mid", "w2_int_stress", "damping_mid", "energy_check")
+
+
 def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch=(0.0, 0.0),
          specimen: Specimen = Specimen(), dynamics: Dynamics = Dynamics(),
          rtol: float = 1e-13, max_iter: int = 40) -> HoldResult:
@@ -299,10 +336,22 @@ def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch
     stress is only piecewise smooth), mass-proportional damping C = 2 zeta omega_1 m_G with
     omega_1 = sqrt(K_el / m_G), K_el = (B/H) dc/d eps1 of sliding prevented; dt = T1 /
     steps_per_period. Stops at the first outcome of ``hmodel.burst_rule.decide`` or, undecided,
-    at rule.max_periods T1. ``eps_switch``: (eps1, eps2) of the state from the start of the path
-    (for the history's strains). Newton stops at |residual| <= rtol x B (|s1| + |R s2|) [N/m]
-    (the scale of the round-off of B c): the energy balance's residual per step is the Newton
-    residual times dU1."""
+    at rule.max_periods T1; 'not_converged' when a time step converges at no substep (down to
+    dt / 2**MAX_CUTS; what failed in ``failure_reason``). ``eps_switch``: (eps1, eps2) of the
+    state from the start of the path (for the history's strains). Newton stops at |residual| <=
+    rtol x B (|s1| + |R s2|) [N/m] (the scale of the round-off of B c).
+
+    Every step records the integrator's energies (E_c = m_G v^2 / 2, the trapezoidal works of
+    its forces) and their balance's residual, ``newton_work``: |dE_c - (dW2_ext - dW2_int - dD)|
+    over the largest second-order energy so far (E_c, |W2_ext|, |W2_int|, D), an identity of
+    Newmark's scheme up to the Newton residual times dU1 (the work of the Newton residual: it
+    proves nothing about the mass or the forces); and the energy check that the scheme cannot
+    satisfy by itself (``burst_rule.EnergyCheck``): E_c at the step's midpoint of the
+    homogeneous velocity field dU1/dt (``Specimen.kinetic_energy``: the field integrated with the
+    density, not m_G), W2_int from the material's stress and strain (``stress_work`` x B H), the
+    damping's work by the midpoint rule: ``energy_check`` its residual [J/m] (O(dt^2) of the
+    run's energies on a healthy run), and W2_int from the stresses beside W2_int of the forces
+    (``burst_rule.check_columns``: their relative difference, ``work_check``)."""
     check_ratio(ratio, None)
     specimen.validate()
     dynamics.validate()
@@ -315,32 +364,39 @@ def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch
     omega = math.sqrt(k_el / m)
     T1 = 2.0 * math.pi / omega
     dt = T1 / dynamics.steps_per_period
-    damp = 2.0 * dynamics.damping_ratio * omega * m
+    alpha = 2.0 * dynamics.damping_ratio * omega        # C = alpha m_G: mass-proportional
+    damp = alpha * m
     rule = dynamics.rule
     window = rule.window_periods * T1
     n_max = int(math.ceil(rule.max_periods * dynamics.steps_per_period))
-    G0, G_ext = B * c0, B * c_hold
+    # the switch's internal force by the function every step uses (a zero increment: c0 to
+    # round-off), the held one dG above it: the switch is an equilibrium of the discrete system
+    G0 = B * _tie_response(state, params, ratio, 0.0)[0]
+    G_ext = G0 + B * (c_hold - c0)
     s = to_voigt(state.stress)[0]
     tol = rtol * B * (abs(s[0]) + abs(ratio * s[1]))      # the round-off scale of B c
     # the run starts at rest with the force G_ext applied: a0 from the equation of motion
     u, v, a = 0.0, 0.0, (G_ext - G0) / m
-    cols = {k: [0.0] for k in ("t", "U1", "v", "c", "ke", "w_ext", "w_int", "w2_ext", "w2_int",
-                               "damping", "energy_residual")}
+    cols = {k: [0.0] for k in HOLD_COLUMNS}
     cols["c"] = [c0]
     cols["newton_iters"] = [0]
     e1 = [float(eps_switch[0])]
     G_int = G0
     st = state
+    check = EnergyCheck(alpha)
+    scale = 0.0                   # the largest second-order energy of the integrator so far
     x = 0.0                       # d eps1 of the step (guess: none)
     outcome = None
     cut_steps = {}
+    why = ""
     floor = 0.5 ** MAX_CUTS
     for n in range(1, n_max + 1):
         # the step, whole or (its Newton failing) in substeps: halves, growing back x2 after
         # each success, down to dt / 2**MAX_CUTS; each substep Newmark's own (its balance exact)
         frac, h, depth = 0.0, 1.0, 0
-        dw = dict.fromkeys(("w_ext", "w_int", "w2_ext", "w2_int", "damping"), 0.0)
-        ke0, its, failed = 0.5 * m * v * v, 0, None
+        dw = dict.fromkeys(("w_ext", "w_int", "w2_ext", "w2_int", "damping", "w2_int_stress"),
+                           0.0)
+        ke0, its, failed, worst, ke_mid = 0.5 * m * v * v, 0, None, 0.0, 0.0
         while frac < 1.0:
             h = min(h, 1.0 - frac)
             try:
@@ -364,6 +420,12 @@ def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch
             dw["damping"] += du * damp * 0.5 * (v + v1)
             dw["w2_ext"] += du * (G_ext - G0)
             dw["w2_int"] += du * 0.5 * ((G_int - G0) + (G1 - G0))
+            # the energy check: the material's own work, the field's kinetic energy
+            dwi = B * H * float(stress_work(st, ns, state.stress))
+            dw["w2_int_stress"] += dwi
+            ke_mid = specimen.kinetic_energy(du / hs, ratio)
+            res = check.step(hs, ke_mid, du * (G_ext - G0), dwi)
+            worst = res if abs(res) > abs(worst) else worst
             u, v, a, G_int, st, c_end = u + du, v1, a1, G1, ns, c
             its += it
             x /= h                        # the next (sub)step's guess, per whole step
@@ -372,25 +434,26 @@ def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch
         if depth:
             cut_steps[n] = depth
         if failed is not None:
-            # no time step, however small, converges: the specimen's collapse outruns the
-            # integrator (the step was cut to dt / 2**MAX_CUTS): recorded as the failure
-            outcome = "failure"
+            # no time step, however small, converges: the integrator stopped, not the specimen
+            outcome = "not_converged"
             cut_steps[n] = MAX_CUTS
-            fail_why = (f"time step {n} did not converge even in substeps of dt / 2**{MAX_CUTS} "
-                        f"({failed})")
+            why = (f"time step {n} did not converge even in substeps of dt / 2**{MAX_CUTS} "
+                   f"({failed})")
             if frac == 0.0:
                 break
         ke1 = 0.5 * m * v * v
-        dke = ke1 - ke0
-        scale = max(abs(dke), abs(dw["w2_ext"]), abs(dw["w2_int"]), abs(dw["damping"]))
-        res = (abs(dke - (dw["w2_ext"] - dw["w2_int"] - dw["damping"])) / scale
-               if scale > 0 else 0.0)
         cols["t"].append((n - 1 + frac) * dt); cols["U1"].append(u); cols["v"].append(v)
         cols["c"].append(c_end)
         cols["ke"].append(ke1)
         for k, d in dw.items():
             cols[k].append(cols[k][-1] + d)
-        cols["energy_residual"].append(res)
+        scale = max(scale, ke1, abs(cols["w2_ext"][-1]), abs(cols["w2_int"][-1]),
+                    cols["damping"][-1])
+        res = abs((ke1 - ke0) - (dw["w2_ext"] - dw["w2_int"] - dw["damping"]))
+        cols["newton_work"].append(res / scale if scale > 0 else 0.0)
+        cols["ke_mid"].append(ke_mid)
+        cols["damping_mid"].append(check.damping)
+        cols["energy_check"].append(worst)
         cols["newton_iters"].append(its)
         e1.append(e1[0] + u / H)
         if outcome is not None:
@@ -402,8 +465,7 @@ def hold(state: HState, params: HParams, ratio: float, c_hold: float, eps_switch
     hist["eps1"] = np.asarray(e1)
     hist["eps2"] = float(eps_switch[1]) + ratio * (hist["eps1"] - e1[0])
     hist["G_int"] = B * hist["c"]
-    return HoldResult(outcome or "undecided", T1, dt, m, k_el, hist, cut_steps,
-                      fail_why if failed is not None else "")
+    return HoldResult(outcome or "undecided", T1, dt, m, k_el, hist, cut_steps, why)
 
 
 class _NewtonFailed(RuntimeError):
@@ -505,23 +567,32 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
                     "c_peak": float(c[k_peak]) if k_peak is not None else math.nan,
                     "switch": switch, "eta_switch": float(info.eta[k]),
                     "eps1_switch": float(p.eps[k, 0]), "c_switch": c_sw, "dc": float(dc_run),
+                    "dc_rule": pk.missed(),
                     "static_solution": bool(stat["converged"]), "c_max_scan": stat["c_max_scan"],
                     "static_verdict": stat["verdict"], "static_verdict_line": stat["verdict_line"],
-                    "outcome": run.outcome, "ke_growth": ke_growth(h["ke"]),
+                    "outcome": run.outcome,
+                    **release_columns(h["t"], h["ke"], h["w2_ext"], run.T1),
+                    "ke_growth": ke_growth(h["ke"]),
                     "ke_max": float(np.max(h["ke"])), "w2_ext_end": float(h["w2_ext"][-1]),
                     "w2_int_end": float(h["w2_int"][-1]), "damping_end": float(h["damping"][-1]),
                     "t_end": float(h["t"][-1]), "steps": int(len(h["t"]) - 1),
-                    "energy_residual": float(np.max(h["energy_residual"])),
+                    "newton_work": float(np.max(h["newton_work"])), **check_columns(h),
+                    "newton_iters_mean": (float(np.mean(h["newton_iters"][1:]))
+                                          if len(h["t"]) > 1 else 0.0),
                     "T1": run.T1, "dt": run.dt, "mass": run.mass, "stiffness": run.stiffness,
-                    "time_steps_cut": run.cut_steps, "failure_reason": run.failure,
+                    "failure_reason": run.failure_reason, "time_steps_cut": run.cut_steps,
                 }
                 rows.append(row)
-                hists.append({"ratio": float(R), "start_fraction": f, "switch": switch, **h})
+                hists.append({"ratio": float(R), "start_fraction": f, "switch": switch,
+                              "T1": run.T1, **h})
+                rel = (f"E_c - E_c(0) passed {RELEASE:g} W2_ext at {row['t_release_t1']:.2f} T1"
+                       if row["released"] else f"E_c - E_c(0) stayed below {RELEASE:g} W2_ext")
                 say(f"  {switch}: c held at {c_sw + dc_run:.6g} Pa: static solution "
                     f"{'exists' if stat['converged'] else 'none'} (max c along the tie "
                     f"{stat['c_max_scan']:.6g}); dynamics: {run.outcome} after "
-                    f"{row['steps']} steps ({row['t_end']:.4g} s, T1 = {run.T1:.3g} s), "
-                    f"E_c up {row['ke_growth']:.3g}x")
+                    f"{row['steps']} steps ({row['t_end']:.4g} s, T1 = {run.T1:.3g} s), {rel} "
+                    f"(largest {row['ke_w2ext_max']:.3g} x W2_ext)"
+                    + (f"; {run.failure_reason}" if run.failure_reason else ""))
     return BurstResult(rows, hists, paths, eta_peak, drained, time.perf_counter() - t0)
 
 
@@ -583,10 +654,13 @@ def cone_at(params: HParams, eta: float, d_eps1: float = 1e-5, n: int = 360) -> 
 
 BURST_COLUMNS = ["ratio", "start_fraction", "eta_start", "eta_peak_c", "fraction_peak_c",
                  "eps1_peak_c", "c_start", "c_peak", "switch", "eta_switch", "eps1_switch",
-                 "c_switch", "dc", "static_solution", "c_max_scan", "outcome", "ke_growth",
+                 "c_switch", "dc", "dc_rule", "static_solution", "c_max_scan", "outcome",
+                 "ke_w2ext_max", "t_release", "t_release_t1", "released", "ke_growth",
                  "ke_max", "w2_ext_end", "w2_int_end", "damping_end", "t_end", "steps",
-                 "energy_residual", "T1", "dt", "mass", "stiffness"]
+                 "newton_work", "energy_check", "work_check", "newton_iters_mean", "T1", "dt",
+                 "mass", "stiffness", "failure_reason"]
 HISTORY_COLUMNS = ["ratio", "start_fraction", "switch", "step", "t", "U1", "v", "eps1", "eps2",
                    "c", "G_int", "ke", "w_ext", "w_int", "w2_ext", "w2_int", "damping",
-                   "energy_residual", "newton_iters"]
+                   "newton_work", "ke_mid", "w2_int_stress", "damping_mid", "energy_check",
+                   "newton_iters"]
 PATH_COLUMNS = ["ratio", "start_fraction", "eps1", "eps2", "s1", "s2", "p", "q", "eta", "c"]

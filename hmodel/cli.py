@@ -285,13 +285,17 @@ def cmd_burst(args, stage):
     print(f"drained peak eta = {res.eta_peak:.4f} at sigma2 = {args.sigma2:g} Pa"
           + (f"; first W2 = 0 of the directional analysis at eta = "
              f"{fmt(cone['eta_first_w2'], '.4f', 'never (before the peak)')}" if cone else ""))
-    # eta_peak_c: none where c does not peak within --path-strain (one below run, at its end)
-    print("    R  start  eta_start  eta_peak_c  (fraction)  switch  static  outcome      E_c growth")
+    # eta_peak_c: none where c does not peak within --path-strain (one below run, at its end);
+    # the growth measure (burst_rule.energy_release): the largest (E_c - E_c(0)) / W2_ext and
+    # when it passed RELEASE (never: it did not)
+    print("    R  start  eta_start  eta_peak_c  (fraction)  switch  static  outcome        "
+          "max (E_c-E_c0)/W2_ext  t_release/T1")
     for r in res.rows:
         frac = f"({fmt(r['fraction_peak_c'], '.3f')})" if np.isfinite(r["eta_peak_c"]) else ""
         print(f"{r['ratio']:5g}  {r['start_fraction']:5g}  {r['eta_start']:9.4f}  "
               f"{fmt(r['eta_peak_c'], '10.4f')}  {frac:7s}     {r['switch']:6s}  "
-              f"{'yes' if r['static_solution'] else 'none':6s}  {r['outcome']:11s}  {r['ke_growth']:.3g}")
+              f"{'yes' if r['static_solution'] else 'none':6s}  {r['outcome']:13s}  "
+              f"{fmt(r['ke_w2ext_max'], '21.3g')}  {fmt(r['t_release_t1'], '12.2f', 'never')}")
     if cone.get("cone_at_first_w2"):
         ca = cone["cone_at_first_w2"]
         rr = ca["ratio_range"]
@@ -303,8 +307,15 @@ def cmd_burst(args, stage):
                      if np.isfinite(ce["eta"]) else
                      "never enters the cone W2 <= 0 of the drained path before its peak")
             print(f"R = {R}: strain direction alpha_eps = {ce['alpha_eps']:.2f} deg {where}")
-    worst = max(r["energy_residual"] for r in res.rows) if res.rows else 0.0
-    print(f"energy balance: largest relative residual of a step {worst:.2e} (bound 1e-6)")
+    if res.rows:
+        print(f"energy check (the material's stress and strain, the field's kinetic energy, "
+              f"O(dt^2)): largest relative residual {max(r['energy_check'] for r in res.rows):.2e}"
+              f"; Newmark's own balance (the work of the Newton residual): largest "
+              f"{max(r['newton_work'] for r in res.rows):.2e} a step")
+    for r in res.rows:
+        if r["failure_reason"]:
+            print(f"R = {r['ratio']:g}, start {r['start_fraction']:g}, {r['switch']}: not "
+                  f"converged: {r['failure_reason']}")
     print(f"wrote {args.out}/burst.csv, history.csv, paths.csv, params.json, summary.json, fig_burst_*.png "
           f"({t_run:.1f} s)")
 

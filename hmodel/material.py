@@ -24,7 +24,7 @@ from .params import HParams
 __all__ = [
     "HState", "HEX_FIELDS", "Increment", "reference_state", "update", "update_full", "update_copies",
     "broadcast_state",
-    "to_voigt", "from_voigt", "tangent_from_voigt", "take_points", "check_state",
+    "to_voigt", "from_voigt", "tangent_from_voigt", "take_points", "check_state", "stress_work",
 ]
 
 # Above this many points the parallel kernel pays for its thread start-up.
@@ -192,6 +192,19 @@ def take_points(state: HState, index) -> HState:
 
 
 # -- the update --------------------------------------------------------------------------------
+def stress_work(old: HState, new: HState, stress0) -> np.ndarray:
+    """(*batch,) internal second-order work per unit volume [J/m^3] of the increment from
+    ``old`` to ``new`` (states of the same points), from the material's own records:
+    ((s_old + s_new) / 2 - ``stress0``) : (eps_new - eps_old), stresses (2, 2, *batch) [Pa] and
+    strains HState.stress / .eps (compression positive both: the product is the work). The
+    trapezoid of the stress along the strain increment, exact for a stress linear in the
+    increment; Eq. 1's W2_int of a held run is its sum from the switch (stress0 the stress
+    there), independent of the internal forces an integrator used
+    (``hmodel.burst_rule.EnergyCheck``)."""
+    ds = 0.5 * (np.asarray(old.stress) + np.asarray(new.stress)) - np.asarray(stress0)
+    return np.einsum("ab...,ab...->...", ds, np.asarray(new.eps) - np.asarray(old.eps))
+
+
 def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = True,
                 parallel: bool | None = None, extras: bool = True) -> Increment:
     """Advance every point by the strain increment ``d_eps`` (2, 2, *batch), compression positive.

@@ -382,7 +382,7 @@ def fig_domain(points, path):
 
 
 _SWITCH_STYLE = {"below": ("o", "equilibrium expected"), "past": ("v", "burst expected")}
-_OUTCOME_COLOR = {"equilibrium": "C2", "failure": "C3", "undecided": "0.5"}
+_OUTCOME_COLOR = {"equilibrium": "C2", "failure": "C3", "undecided": "0.5", "not_converged": "C4"}
 
 
 def fig_burst_paths(drained, paths, rows, path, eta_w2=None, title=None):
@@ -451,65 +451,103 @@ def fig_burst_paths(drained, paths, rows, path, eta_w2=None, title=None):
 
 # the end of a run after the switch, by its outcome (black: apart from the colours of the ratios)
 END_MARK = {"failure": ("x", "k", "end: failure"), "equilibrium": ("o", "none", "end: equilibrium"),
-             "undecided": ("s", "none", "end: undecided (at the cap)")}
+            "undecided": ("s", "none", "end: undecided (at the cap)"),
+            "not_converged": ("D", "none", "end: not converged (the integrator, not a burst)")}
 
 
 def fig_burst_ke(histories, path, title="Kinetic energy after the switch", unit="J/m",
                  time_unit=("ms", 1e3)):
-    """E_c against the time since the switch, log axis, one panel per start state, every ratio
-    and switch (colour the ratio, solid ``past``, dashed ``below``), the end of each run marked
-    by its outcome (black cross failure, hollow circle equilibrium, hollow square undecided);
-    one legend below the panels, off the data.
-    ``histories``: list of dicts with ratio, start_fraction, switch, outcome, t [s], ke [J or J/m]."""
+    """Top row: E_c against the time since the switch, log axis, one panel per start state,
+    every ratio and switch (colour the ratio, solid ``past``, dashed ``below``), the end of each
+    run marked by its outcome (``END_MARK``). Bottom row: the growth measure, the energy release
+    (E_c - E_c(0)) / W2_ext (``burst_rule.release_ratio``) against t / T1, with RELEASE and 1
+    (W2_int = 0) drawn, the time it passed RELEASE starred. One legend below the panels.
+    ``histories``: list of dicts with ratio, start_fraction, switch, outcome, t [s], ke, w2_ext
+    [J or J/m] and T1 [s]."""
     from matplotlib.lines import Line2D
+    from .burst_rule import RELEASE, energy_release, release_ratio
     fr = sorted({h["start_fraction"] for h in histories})
     ratios = sorted({h["ratio"] for h in histories}, reverse=True)
     col = {R: f"C{i % 10}" for i, R in enumerate(ratios)}
-    fig, axes = plt.subplots(1, len(fr), figsize=(5.6 * len(fr), 5.2), squeeze=False)
+    fig, axes = plt.subplots(2, len(fr), figsize=(5.6 * len(fr), 9.4), squeeze=False)
     ends = set()
-    for ax, f in zip(axes[0], fr):
+    for ax, ar, f in zip(axes[0], axes[1], fr):
         for h in (h for h in histories if h["start_fraction"] == f):
             t = time_unit[1] * np.asarray(h["t"])
             ke = np.asarray(h["ke"], float)
             ok = ke > 0
-            ax.plot(t[ok], ke[ok], "-" if h["switch"] == "past" else "--", color=col[h["ratio"]],
-                    lw=1.1)
+            ls = "-" if h["switch"] == "past" else "--"
+            ax.plot(t[ok], ke[ok], ls, color=col[h["ratio"]], lw=1.1)
             if ok.any():
                 m, fc, _ = END_MARK.get(h["outcome"], ("s", "none", ""))
                 ax.plot(t[ok][-1], ke[ok][-1], m, mec="k", mfc=fc, color="k", ms=8, mew=1.4,
                         zorder=5)
                 ends.add(h["outcome"])
+            r = release_ratio(ke, h["w2_ext"])
+            tt = np.asarray(h["t"]) / h["T1"]
+            pos = np.isfinite(r) & (r > 0)
+            ar.plot(tt[pos], r[pos], ls, color=col[h["ratio"]], lw=1.1)
+            rel = energy_release(h["t"], ke, h["w2_ext"])
+            if rel["released"]:
+                ar.plot(rel["t_release"] / h["T1"], RELEASE, "*", color=col[h["ratio"]], ms=11,
+                        mec="k", mew=0.6, zorder=5)
         ax.set_yscale("log")
         ax.set_xlabel(f"time since the switch [{time_unit[0]}]")
         ax.set_ylabel(f"kinetic energy $E_c$ [{unit}]")
         ax.set_title(f"start at {f:g} of the drained peak $\\eta$")
-        ax.grid(alpha=0.3, which="both")
+        ar.axhline(RELEASE, color="k", ls="--", lw=0.9)
+        ar.axhline(1.0, color="0.5", ls=":", lw=0.8)
+        ar.set_yscale("log")
+        ar.set_xlabel("time since the switch t / T1 [-]")
+        ar.set_ylabel(r"energy release $(E_c - E_c(0)) / W_{2,ext}$ [-]")
+        for a in (ax, ar):
+            a.grid(alpha=0.3, which="both")
     handles = [Line2D([], [], color=col[R], lw=2, label=f"R = {R:g}") for R in ratios]
     handles += [Line2D([], [], color="k", ls="-", label="past the c peak (burst expected)"),
                 Line2D([], [], color="k", ls="--", label="below the c peak (equilibrium expected)")]
     handles += [Line2D([], [], ls="none", marker=END_MARK[o][0], mec="k", mfc=END_MARK[o][1],
                        color="k", ms=8, mew=1.4, label=END_MARK[o][2])
                 for o in END_MARK if o in ends]
+    handles += [Line2D([], [], color="k", ls="--", lw=0.9,
+                       label=f"RELEASE = {RELEASE:g} (star: when it was passed)"),
+                Line2D([], [], color="0.5", ls=":", lw=0.8, label="1: W2_int = 0 (Eq. 1)")]
     rows = -(-len(handles) // 5)
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 5), fontsize=8,
                frameon=False)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout(rect=(0, 0.03 + 0.04 * rows, 1, 1))
+    fig.tight_layout(rect=(0, 0.02 + 0.025 * rows, 1, 1))
     save_figure(fig, path)
 
 
-def fig_burst_residual(histories, path, bound=1e-6, title="Energy balance of each time step"):
-    """The relative residual of the discrete energy balance (Eq. 1, second-order form) at every
-    step of every run, log axis, with the stated bound."""
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+def fig_burst_residual(histories, path, bound=1e-6, title="Energy balances of each time step"):
+    """Left: Newmark's own balance of every step of every run, ``newton_work`` (the work of the
+    Newton residual: an identity of the scheme), log axis, with ``bound``. Right: the energy
+    check that the scheme cannot satisfy by itself (``burst_rule.EnergyCheck``), |energy_check|
+    over the run's largest second-order energy, against t / T1. ``histories``: dicts with
+    ratio, start_fraction, switch, t [s], T1 [s], newton_work, energy_check, ke_mid, w2_ext,
+    w2_int_stress, damping_mid."""
+    fig, (ax, ac) = plt.subplots(1, 2, figsize=(12, 4.4))
     for i, h in enumerate(histories):
-        r = np.asarray(h["energy_residual"], float)[1:]
+        lab = f"R = {h['ratio']:g}, start {h['start_fraction']:g}, {h['switch']}"
+        r = np.asarray(h["newton_work"], float)[1:]
         ax.semilogy(np.arange(1, len(r) + 1), np.maximum(r, 1e-18), lw=0.7, color=f"C{i % 10}",
-                    label=f"R = {h['ratio']:g}, start {h['start_fraction']:g}, {h['switch']}")
+                    label=lab)
+        scale = max(float(np.max(h["ke_mid"])), float(np.max(np.abs(h["w2_ext"]))),
+                    float(np.max(np.abs(h["w2_int_stress"]))), float(np.max(h["damping_mid"])))
+        e = np.abs(np.asarray(h["energy_check"], float)[1:]) / (scale if scale > 0 else 1.0)
+        ac.semilogy(np.asarray(h["t"])[1:] / h["T1"], np.maximum(e, 1e-18), lw=0.7,
+                    color=f"C{i % 10}", label=lab)
     ax.axhline(bound, color="k", ls="--", lw=0.9, label=f"bound {bound:g}")
     ax.set_xlabel("time step after the switch")
-    ax.set_ylabel(r"$|\Delta E_c - (\Delta W_2^{ext} - \Delta W_2^{int} - \Delta D)|$ / step scale [-]")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=6, ncol=2)
-    ax.set_title(title)
+    ax.set_ylabel(r"$|\Delta E_c - (\Delta W_2^{ext} - \Delta W_2^{int} - \Delta D)|$ / scale [-]")
+    ax.set_title("Newmark's own balance: the work of the Newton residual", fontsize=9)
+    ac.set_xlabel("time since the switch t / T1 [-]")
+    ac.set_ylabel(r"$|E_c^{mid} - (\Phi_n + \Phi_{n+1})/2|$ / the run's largest $W_2$ [-]")
+    ac.set_title("the energy check (O(dt$^2$)): $E_c$ of the velocity field with the density\n"
+                 r"against $\Phi = W_2^{ext} - W_2^{int}$(stress, strain)$ - D$", fontsize=9)
+    for a in (ax, ac):
+        a.grid(alpha=0.3, which="both")
+        a.legend(fontsize=6, ncol=2)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
     save_figure(fig, path)

@@ -22,4 +22,4 @@ for name, e in res.summary["events"].items():     # the first firing of every cr
 burst = run_burst(BurstConfig(specimen=cfg, ratios=(-2.0,), start_fractions=(0.9,), fields=False))
 for row in burst.rows:                            # the columns of burst.csv
     print(f"burst R = {row['ratio']:g}, {row['switch']}: {row['outcome']} (c peak at eta = "
-          f"{row['eta_peak_c']:.4f}, kinetic energy x{row['ke_growth']:.3g})")
+          f"{row['eta_peak_c']:.4f}, E_c - E_c(0) at most {row['ke_w2ext_max']:.3g} x W2_ext)")

@@ -108,6 +108,18 @@ def test_c_held_by_the_servo_or_a_dead_load_on_a_stable_state(small_sample, how)
     assert h[-1, 6] <= opts.stress_tol
     de1, de2 = h[-1, 2] - h[0, 2], h[-1, 3] - h[0, 3]
     assert de1 > 0 and abs(de2 - R * de1) < 1e-6 * abs(de1)      # the tie kept (round-off: above)
+    # the anatomy of the last check is that of the increment from the state UNSTABLE_WINDOW
+    # checks back (kept as end_prev_state, which the burst's figures and VTU files use)
+    from dem.anatomy import (UNSTABLE_TAU, UNSTABLE_WINDOW, anatomy, contact_state,
+                             energy_scale)
+    from dem.burst import H
+    s0 = contact_state(Simulation(small_sample))
+    end, prev = Simulation(res.end_state), Simulation(res.end_prev_state)
+    assert end.step - prev.step == UNSTABLE_WINDOW * opts.check_every
+    a = anatomy(s0, contact_state(end), end.n, contact_state(prev),
+                UNSTABLE_TAU * energy_scale(s0, end.params.kn))
+    for k in ("n_unstable_raw", "n_unstable", "n_clusters", "largest_cluster", "contacts_lost"):
+        assert h[-1, H[k]] == a[k], k
 
 
 def test_the_contact_sum_is_the_walls_less_the_unbalanced_term(small_sample):
@@ -212,3 +224,51 @@ def test_the_tied_control_does_not_depend_on_the_thread_split(small_sample):
         runs.append(sim.state())
     a, b = runs
     assert all(np.array_equal(x, y) for x, y in zip(a[1:15], b[1:15]))
+
+
+# -- the theory's verdict on a staircase (dem.burst.theory_verdict): hand-made sequences ------
+def _eqs(ks, c0=60e3, step=2e3):
+    return [(f"e{i}", c0 + i * step, 1e-3 + i * 1e-5, k) for i, k in enumerate(ks)]
+
+
+def test_verdict_passes_where_k_path_turns_before_the_failing_holds():
+    from dem.burst import theory_verdict
+    eqs = _eqs([5e7, 3e7, 1e7, -5e7])
+    v = theory_verdict(eqs, [("e3", 2000.0), ("e3", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "passes", v
+    # k = 0 between e2 (1e7) and e3 (-5e7): 1/6 of the way, in c and in eps1
+    assert v["c_cross"] == pytest.approx(64e3 + 2e3 / 6, rel=1e-12)
+    assert v["eps1_cross"] == pytest.approx(1e-3 + 2e-5 + 1e-5 / 6, rel=1e-12)
+    assert v["overshoot_c"] == pytest.approx(66e3 - v["c_cross"], rel=1e-12)
+    assert v["c_cross_band"][0] < v["c_cross"] < v["c_cross_band"][1]
+    assert v["k_path_ratio"] == -1.0 and v["c_peak_rest"] == 66e3
+    assert v["finite_step_failures"] == 0          # the 2 kPa step failed where k <= 0
+
+
+def test_a_positive_k_path_within_the_noise_does_not_move_the_crossing():
+    # the 4000-disk pattern: clearly negative, a small positive one within the noise, negative
+    from dem.burst import theory_verdict
+    v = theory_verdict(_eqs([5e7, 3e7, -2e7, 1e6, -5e8]), [("e4", 100.0)], 4e6, 100.0)
+    assert v["verdict"] == "passes"
+    assert v["c_cross"] == pytest.approx(62e3 + 2e3 * 3 / 5, rel=1e-12)   # between e1 and e2
+    assert v["overshoot_c"] == pytest.approx(68e3 - v["c_cross"], rel=1e-12)
+
+
+def test_verdict_contradicted_and_the_cases_without_one():
+    from dem.burst import theory_verdict
+    # a hold of +dc failed from an equilibrium where k_path is clearly positive
+    v = theory_verdict(_eqs([5e7, 3e7, 2e7]), [("e2", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "contradicted" and "clearly positive" in v["why"]
+    assert math.isnan(v["c_cross"])
+    # a larger step from a clearly positive k_path: counted apart, not against the theory
+    v = theory_verdict(_eqs([5e7, 3e7, -2e7]), [("e1", 2000.0), ("e2", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "passes" and v["finite_step_failures"] == 1
+    # no hold of +dc failed; a missing k_path; no noise
+    assert theory_verdict(_eqs([5e7, -3e7]), [("e1", 500.0)], 1e6, 100.0)["verdict"] == "no verdict"
+    assert theory_verdict(_eqs([5e7, math.nan]), [("e1", 100.0)], 1e6, 100.0)["verdict"] == \
+        "no verdict"
+    assert theory_verdict(_eqs([5e7, -3e7]), [("e1", 100.0)], math.nan, 100.0)["verdict"] == \
+        "no verdict"
+    # k_path within the noise already at the start: no crossing located, the verdict stands
+    v = theory_verdict(_eqs([1e6, -3e7]), [("e1", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "passes" and math.isnan(v["c_cross"]) and "first" in v["why"]

@@ -167,9 +167,10 @@ def test_fem_biaxial_ends_with_the_outcome(tmp_path, monkeypatch, capsys):
 
 def test_dynamic_time_steps_cut_and_the_failure_they_cannot_pass(monkeypatch):
     """fem.dynamics.hold on the elastic 1 x 1 tied specimen: a time step whose Newton fails
-    (injected, whole steps only) is run in halves, the energy balance of the step still exact
-    (1e-9); one that fails however cut ends the run as 'failure', the rows so far kept, the
-    reason stated."""
+    (injected, whole steps only) is run in halves, Newmark's balance of the step still exact
+    (1e-9) and the energy check of its halves within its healthy (omega dt)^2 / 16; one that
+    fails however cut ends the run as 'not_converged' (never 'failure': the integrator
+    stopped, not the specimen), the rows so far kept, what failed stated."""
     import fem.dynamics as dyn
     from hmodel import HParams
     from hmodel.burst_rule import BurstRule
@@ -199,8 +200,10 @@ def test_dynamic_time_steps_cut_and_the_failure_they_cannot_pass(monkeypatch):
 
     r = run(lambda n, dt, dt0: n == 7 and dt == dt0)       # the 7th step, whole: fails once
     h = r.history
-    assert r.cut_steps == {7: 1} and r.failure == "" and len(h["t"]) == 31
-    assert h["t"][7] == pytest.approx(7 * r.dt) and h["balance_residual"].max() <= 1e-9
+    assert r.cut_steps == {7: 1} and r.failure_reason == "" and len(h["t"]) == 31
+    assert h["t"][7] == pytest.approx(7 * r.dt) and h["newton_work"].max() <= 1e-9
+    from hmodel.burst_rule import check_columns
+    assert check_columns(h)["energy_check"] <= (2 * math.pi / 20) ** 2 / 16
     r = run(lambda n, dt, dt0: n >= 10)                    # from the 10th call on, nothing converges
-    assert r.outcome == "failure" and "did not converge even in substeps" in r.failure
+    assert r.outcome == "not_converged" and "did not converge even in substeps" in r.failure_reason
     assert len(r.history["t"]) == 10 and r.cut_steps == {10: 10}

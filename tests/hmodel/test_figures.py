@@ -98,16 +98,20 @@ def test_cone_through_zero_degrees():
 
 def test_burst_ke_legend_is_off_the_data_with_the_end_markers(figures):
     t = np.linspace(0, 0.01, 50)
+    w2 = 1e-8 * (1 - np.exp(-300 * t))
     hist = [{"ratio": -2.0, "start_fraction": 0.9, "switch": "below", "outcome": "equilibrium",
-             "t": t, "ke": 1e-8 * np.exp(-300 * t) + 1e-15},
+             "t": t, "ke": 1e-8 * np.exp(-300 * t) + 1e-15, "w2_ext": w2, "T1": 1e-3},
             {"ratio": -2.0, "start_fraction": 0.9, "switch": "past", "outcome": "failure",
-             "t": t, "ke": 1e-8 * np.exp(500 * t)}]
+             "t": t, "ke": 1e-8 * np.exp(500 * t), "w2_ext": w2, "T1": 1e-3}]
     plots.fig_burst_ke(hist, "x.png")
     (fig,) = figures
     assert all(ax.get_legend() is None for ax in fig.axes)       # no legend on the data
     (legend,) = fig.legends
     labels = [x.get_text() for x in legend.get_texts()]
     assert "end: equilibrium" in labels and "end: failure" in labels and "R = -2" in labels
+    # the second row: the growth measure, RELEASE drawn, the past run starred where it passed it
+    assert len(fig.axes) == 2 and "energy release" in fig.axes[1].get_ylabel()
+    assert any(line.get_marker() == "*" for line in fig.axes[1].lines)
     # the legend lies below the axes
     fig.canvas.draw()
     box = legend.get_window_extent()

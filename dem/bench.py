@@ -31,7 +31,8 @@ def confined_sample(n=12000, seed=1, cache_dir=None, params=None):
     if params != DemParams(n=params.n, seed=params.seed):
         import hashlib
         import json
-        tag += "_" + hashlib.sha256(json.dumps(params.to_dict(), sort_keys=True).encode()).hexdigest()[:10]
+        from .params import hashed_dict     # friction_deg, as before phi_g: the cache stays
+        tag += "_" + hashlib.sha256(json.dumps(hashed_dict(params), sort_keys=True).encode()).hexdigest()[:10]
     path = os.path.join(cache_dir, tag + ".npz") if cache_dir else None
     if path and os.path.exists(path):
         try:

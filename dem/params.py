@@ -176,6 +176,14 @@ def migrate(d: dict) -> dict:
     return out
 
 
+def hashed_dict(params) -> dict:
+    """``params.to_dict()`` under the keys of before their renaming (``RENAMED``), in the same
+    order: what a fingerprint or a cache key hashes, so that those of runs made before a
+    renaming stay valid (a resumed probe sweep, a cached bench sample)."""
+    old = {new: old for old, new in RENAMED.items()}
+    return {old.get(k, k): v for k, v in params.to_dict().items()}
+
+
 def _options():
     from hmodel.options import VOCABULARY
     found = {f.split(".", 1)[1]: t.name for t in VOCABULARY.values() for f in t.fields

@@ -158,3 +158,16 @@ def test_crosscheck_takes_an_hmodel_file(tmp_path, capsys):
     assert code == 2 and len(err) == 1 and "--hmodel-params" in err[0], err
     assert 'model = "dem": allowed "hmodel"' in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_fingerprints_are_those_of_before_phi_g():
+    """A state's fingerprint (what --resume of probes, domain and burst checks) hashes the
+    parameters under their keys of before the renaming (friction_deg): a sweep started before
+    it resumes. The hash below is the one the code before issue 32 gives this state."""
+    from dem.probes import state_fingerprint
+    from dem.sample import generate
+    from dem.simulation import Simulation
+    p = DemParams(n=50, seed=3)
+    x, r, walls = generate(p)
+    assert state_fingerprint(Simulation.new(p, x, r, walls).state()) == \
+        "e53561b30c195531309818126af0880d18de2ac34be3f74e1d8399866fc34ec0"

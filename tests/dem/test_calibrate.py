@@ -621,3 +621,20 @@ def test_sigterm_stops_the_worker_processes_without_waiting_for_their_runs(tmp_p
     work = out / "work"
     assert not list(work.glob("*/result.json"))
     assert (out / "evaluations.jsonl").read_text().count("\n") == 1       # the header alone
+
+
+def test_a_checkpoint_of_before_phi_g_resumes(tmp_path):
+    """A calibration checkpoint written while the field was friction_deg (its header's vary,
+    bounds and start parameters, every evaluation's parameters) is read under phi_g."""
+    space = C.make_space(("kn_over_d", "phi_g"), DemParams(n=100),
+                         {"kn_over_d": (2e9, 32e9), "phi_g": (20.0, 50.0)})
+    header = C._header("hmodel", space, DemParams(n=100), (1, 2), 8, 1, 30, 0.05, 200e3, 0.035,
+                       0.01, 0.001)
+    old = json.loads(json.dumps(header).replace('"phi_g"', '"friction_deg"'))
+    assert "friction_deg" in old["vary"] and "friction_deg" in old["start_params"]
+    rec = {"key": "k", "curve": {}, "params": old["start_params"]}
+    ck = tmp_path / "evaluations.jsonl"
+    ck.write_text(json.dumps({"header": old}) + "\n" + json.dumps(rec) + "\n")
+    done = C.read_checkpoint(str(ck), header)
+    (got,) = done.values()
+    assert got["params"]["phi_g"] == 35.0 and "friction_deg" not in got["params"]

@@ -1,4 +1,5 @@
-"""Command line: python -m dem {biaxial, probes, domain, calibrate, ...} (thin layer over the library)."""
+"""Command line: python -m dem {biaxial, probes, domain, burst, params, bench, calibrate,
+crosscheck} (over the library), its options from the vocabulary of ``hmodel.options``."""
 from __future__ import annotations
 
 import argparse
@@ -12,7 +13,7 @@ from hmodel import options as opt     # the command-line rules shared by every C
 from hmodel.burst_rule import RELEASE
 from hmodel.io import fmt
 
-from .threads import available_threads
+from .params import OPTIONS
 
 
 def _params(a):
@@ -37,25 +38,21 @@ def _check_state_params(own, a):
                          f"({', '.join(diff)}); allowed: the state's own, or no --params")
 
 
-def add_param_options(p, n_default=None):
-    """--params FILE and the main DemParams fields as options (None: from the file / defaults)."""
-    p.add_argument("--params", default=None, help="DemParams as JSON (python -m dem params --out FILE)")
-    p.add_argument("--n", type=opt.integer(1, 10_000_000), default=n_default,
-                   help="number of disks (default: the file's, or 12000)")
-    p.add_argument("--seed", type=opt.integer(0), default=None)
-    p.add_argument("--r-min", type=opt.real(0, 1), default=None, help="[m]")
-    p.add_argument("--r-max", type=opt.real(0, 1), default=None, help="[m]")
-    p.add_argument("--density", type=opt.real(0, 1e5), default=None, help="[kg/m^3]")
-    p.add_argument("--kn-over-d", type=opt.real(0, 1e13), default=None, help="kn / mean diameter [Pa]")
-    p.add_argument("--kt-over-kn", type=opt.real(0, 10), default=None)
-    p.add_argument("--friction", type=opt.real(0, 90, lo_open=False), default=None, help="[deg]")
-    p.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=None,
-                   help="Cundall damping")
-    p.add_argument("--dt-safety", type=opt.real(0, 0.5, hi_open=False), default=None)
-    p.add_argument("--rolling-friction", type=opt.real(0, 10, lo_open=False), default=None,
-                   help="mu_r: rolling moment capped at mu_r R* fn (0 = free rotation, the paper's)")
-    p.add_argument("--rolling-stiffness", type=opt.real(0, 1e3), default=None,
-                   help="k_r = this * kt * R*^2 (used only with --rolling-friction > 0)")
+def add_param_options(p, n_default=None, n_text="the file's, or 12000"):
+    """--params FILE and the main DemParams fields as options (None: from the file / defaults),
+    checked by DemParams (``params_from_args``); --n by the parser (its cap is the CLI's)."""
+    from .params import DemParams
+    d = DemParams()
+    add = opt.add
+    g = p.add_argument_group("DEM parameters (the paper's set unless --params FILE; an option "
+                             "given overrides the file)")
+    add(g, "--params", metavar="FILE", note="of the DEM: python -m dem params --out FILE",
+        default_text="the paper's set")
+    add(g, "--n", n_default, default_text=n_text)
+    for option, field in OPTIONS.items():
+        if option != "--n":
+            add(g, option, record="DemParams", metavar=field.upper(),
+                default_text=f"the file's, else {getattr(d, field):g}")
 
 
 def cmd_params(a):
@@ -80,15 +77,12 @@ def _threads(a):
     set_default_threads(getattr(a, "threads", None))
 
 
-THREADS = opt.integer(1, available_threads())
-
-
 def cmd_biaxial(a):
     from .experiment import run_biaxial
     _threads(a)
     t0 = time.time()
-    res = run_biaxial(_params(a), a.out, rate=a.rate, confining=a.confining, eta_a=a.eta_a,
-                      eps_max=a.eps_max, compaction_friction_deg=a.compaction_friction,
+    res = run_biaxial(_params(a), a.out, rate=a.rate, confining=a.sigma2, eta_a=a.eta_a,
+                      eps_max=a.eps1_max, compaction_friction_deg=a.compaction_phi_g,
                       resume=a.resume, vtk=not a.no_vtk,
                       save_fractions=tuple(a.save_fractions), save_etas=tuple(a.save_etas),
                       params_note=f"python -m dem biaxial; {a.params_note}", verbose=not a.quiet)
@@ -102,11 +96,15 @@ def cmd_biaxial(a):
 
 def _probe_options(a):
     from .probes import ProbeOptions
-    return ProbeOptions(norm=a.norm, ramp_steps=a.ramp_steps, unbalanced_tol=a.unbalanced_tol,
-                        stress_tol=a.stress_tol, max_steps=a.max_steps,
-                        relax_max_steps=a.relax_max_steps, plastic_tol=a.plastic_tol,
-                        strain_tol=a.strain_tol, ke_tol=a.ke_tol, window=a.window,
-                        runaway_ratio=a.runaway_ratio, fail_ratio=a.fail_ratio).validate()
+    try:
+        return ProbeOptions(norm=a.stress_norm, ramp_steps=a.ramp_steps,
+                            unbalanced_tol=a.unbalanced_tol, stress_tol=a.stress_tol,
+                            max_steps=a.max_steps, relax_max_steps=a.relax_max_steps,
+                            plastic_tol=a.plastic_tol, strain_tol=a.strain_tol, ke_tol=a.ke_tol,
+                            window=a.window, runaway_ratio=a.runaway_ratio,
+                            fail_ratio=a.fail_ratio).validate()
+    except ValueError as e:       # name the option as the command line spells it
+        raise opt.record_error(e, "ProbeOptions") from None
 
 
 def cmd_probes(a):
@@ -205,9 +203,7 @@ def _burst_options(a, n_disks=None):
                             probe_d_eps1=a.probe_d_eps1,
                             probe_rate=a.probe_rate).validate(n_disks)
     except ValueError as e:       # name the option as the command line spells it
-        msg = str(e)
-        name = msg.split("=", 1)[0]
-        raise ValueError(f"--{name.replace('_', '-')}{msg[len(name):]}") from None
+        raise opt.record_error(e, "BurstOptions") from None
 
 
 def cmd_burst(a):
@@ -265,7 +261,7 @@ def cmd_calibrate(a):
     s = run_calibration(a.out, _params(a), a.vary, bounds=a.bounds, target=a.target,
                         seeds=a.seeds, check_seeds=a.check_seeds, initial=a.initial,
                         batch=a.batch, max_evals=a.max_evals, rate=a.rate,
-                        confining=a.confining, eps_max=a.eps_max,
+                        confining=a.sigma2, eps_max=a.eps1_max,
                         post_peak_strain=a.post_peak_strain, smooth=a.smooth,
                         workers=a.workers, scheduler=a.scheduler, resume=a.resume,
                         stage=getattr(a, "stage", None), params_note=a.params_note,
@@ -282,196 +278,166 @@ def cmd_crosscheck(a):
     from .crosscheck import run_crosscheck
     t0 = time.time()
     c, timings = run_crosscheck(a.out, full=a.full, n=a.n, seed=a.seed, rate=a.rate,
-                                workers=a.workers, skip_dem=a.skip_dem, domain=not a.no_domain,
+                                workers=a.workers, skip_dem=a.no_dem, domain=not a.no_domain,
                                 dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
                                 dem_domain=a.dem_domain, dem_params=a.dem_params,
                                 scheduler=a.scheduler, hmodel_params=a.hmodel_params,
-                                burst=not a.no_burst, burst_ratios=a.burst_ratios,
-                                burst_fractions=a.burst_fractions, verbose=not a.quiet)
+                                burst=not a.no_burst, burst_ratios=a.ratios,
+                                burst_fractions=a.start_fractions, verbose=not a.quiet)
     print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
     print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
 
 
-def build_parser() -> opt.Parser:
-    """The parser of ``python -m dem`` (every subcommand and option), built without running
-    anything: ``main`` parses with it, the tests check commands against it."""
-    ap = opt.Parser(prog="python -m dem", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True, parser_class=opt.Parser)
+DESCRIPTION = """The compact 2D DEM (Numba) and the paper's DEM experiment: a sample compacted and
+tested in drained biaxial compression, stress probes and the bifurcation domain, the burst, the
+calibration against the H-model, the cross-check of the three parts.
+python -m dem COMMAND --help lists a command's options, each with its unit and default. --out is
+required: a folder (the parameter file for params) that records the command that wrote it
+(command.json); another command refuses that folder unless --force."""
 
-    b = sub.add_parser("biaxial", help="compact and run the drained biaxial test")
+
+def _equilibrium_options(p, record):
+    """The equilibrium rule of dem.settle: its tolerances, shared by probes, domain (checked by
+    ProbeOptions) and burst (by BurstOptions)."""
+    add = opt.add
+    g = p.add_argument_group("equilibrium (dem.settle's rule)")
+    add(g, "--unbalanced-tol", 1e-4, record=record)
+    add(g, "--stress-tol", 25.0, record=record)
+    add(g, "--strain-tol", 0.01, record=record)
+    add(g, "--ke-tol", 1e-10, record=record)
+    add(g, "--window", 20_000, record=record)
+
+
+def _probe_parser_options(p):
+    """The options of every directional analysis (probes, domain), checked by ProbeOptions."""
+    add = opt.add
+    PO = "ProbeOptions"
+    _equilibrium_options(p, PO)
+    g = p.add_argument_group("stress probes")
+    add(g, "--stress-norm", 2500.0, record=PO)
+    add(g, "--step-q3", 5.0)
+    add(g, "--step-other", 10.0)
+    add(g, "--directions", default_text="every --step-q3 in the third quadrant, --step-other "
+        "elsewhere (45 directions)")
+    add(g, "--ramp-steps", 5000, record=PO)
+    add(g, "--max-steps", 400_000, record=PO, note="of a probe (about 20 windows: 400,000 at "
+        "1000 disks, 1,400,000 at 12,000)")
+    add(g, "--runaway-ratio", 100.0, record=PO)
+    add(g, "--fail-ratio", 1000.0, record=PO)
+    add(g, "--plastic-tol", 0.05, record=PO)
+    add(g, "--relax-max-steps", 2_000_000, record=PO, note="of the state into the reference")
+    add(g, "--threads", default_text="auto (dem.threads)", note="of the relaxation; each probe "
+        "runs on one")
+    add(g, "--workers", default_text="the cores")
+    add(g, "--scheduler", default_text="none (local processes)")
+
+
+def build_parser() -> opt.Parser:
+    """The parser of ``python -m dem`` (every subcommand and option, from the vocabulary of
+    ``hmodel.options``), built without running anything: ``main`` parses with it, the tests
+    check commands against it."""
+    add = opt.add
+    ap = opt.Parser(prog="python -m dem", description=DESCRIPTION)
+    sub = ap.add_subparsers(dest="cmd", required=True, parser_class=opt.Parser, metavar="COMMAND")
+
+    b = sub.add_parser("biaxial", help="compaction and drained biaxial test, states saved along "
+                                       "the path (Figs. 13-14)")
+    opt.add_out(b)
     add_param_options(b)
-    b.add_argument("--out", required=True)
-    b.add_argument("--rate", type=opt.real(0, 10), default=0.01, help="axial strain rate [1/s]")
-    b.add_argument("--confining", type=opt.real(0, 1e9), default=200e3, help="[Pa]")
-    b.add_argument("--eta-a", type=opt.real(0, 2), default=1.029,
-                   help="eta = q/p of point A (p = (s1 + s2)/2)")
-    b.add_argument("--eps-max", type=opt.real(0, 0.5), default=0.10)
-    b.add_argument("--compaction-friction", type=opt.real(0, 90, lo_open=False), default=0.0,
-                   help="[deg]")
-    b.add_argument("--save-fractions", type=opt.reals(0, 1, hi_open=False),
-                   default=[0.8, 0.85, 0.9, 0.93, 0.95, 0.97],
-                    help="save the first state at these fractions of the peak eta in DIR/states "
-                        "(for `dem domain`); comma-separated, in (0, 1]")
-    b.add_argument("--save-etas", type=opt.reals(0, 2), default=[],
-                    help="also save the first state at these absolute eta (comma-separated)")
-    b.add_argument("--resume", action="store_true", help="continue from DIR/checkpoint.npz")
-    b.add_argument("--no-vtk", action="store_true")
-    opt.add_quiet(b)
-    b.add_argument("--threads", type=THREADS, default=None,
-                    help="threads (results do not depend on it); default: auto, see dem.threads")
+    g = b.add_argument_group("the test")
+    add(g, "--sigma2", 200e3, note="held on the lateral walls")
+    add(g, "--rate", 0.01)
+    add(g, "--eta-a", 1.029, note="the state saved as stateA.npz")
+    add(g, "--eps1-max", 0.10)
+    add(g, "--compaction-phi-g", 0.0)
+    add(g, "--save-fractions", [0.8, 0.85, 0.9, 0.93, 0.95, 0.97])
+    add(g, "--save-etas", [], default_text="none")
+    add(g, "--resume", note="from --out/checkpoint.npz")
+    add(g, "--no-vtk")
+    add(g, "--threads", default_text="auto (dem.threads)")
+    opt.add_quiet(g)
     b.set_defaults(func=cmd_biaxial)
 
-    # the equilibrium rule of dem.settle: its tolerances, shared by probes, domain and burst
-    eq = opt.Parser(add_help=False)
-    eq.add_argument("--unbalanced-tol", type=opt.real(0, 1), default=1e-4,
-                    help="equilibrium: unbalanced-force ratio at every check of the window")
-    eq.add_argument("--stress-tol", type=opt.real(0), default=25.0,
-                    help="equilibrium: stress error at every check of the window [Pa] (the wall "
-                         "stresses' from their targets; dem burst: |c - c_target|)")
-    eq.add_argument("--strain-tol", type=opt.real(0, 1), default=0.01,
-                    help="equilibrium: strain drift over the window / the strain scale (a "
-                         "probe's |de|; dem burst: the larger of the strain since the switch "
-                         "and the elastic strain of 2.5 kPa)")
-    eq.add_argument("--ke-tol", type=opt.real(0), default=1e-10,
-                    help="equilibrium: backbone kinetic energy per disk [J]")
-    eq.add_argument("--window", type=opt.integer(1000), default=20_000,
-                    help="equilibrium window at 1000 disks [steps] (scaled with sqrt(n))")
-
-    po = opt.Parser(add_help=False, parents=[eq])     # options of every directional analysis
-    po.add_argument("--norm", type=opt.real(0, 1e8), default=2500.0, help="|dsigma| [Pa]")
-    po.add_argument("--step-q3", type=opt.real(0, 90, hi_open=False), default=5.0,
-                    help="[deg] in the third quadrant")
-    po.add_argument("--step-other", type=opt.real(0, 90, hi_open=False), default=10.0,
-                    help="[deg] elsewhere")
-    po.add_argument("--directions", type=opt.reals(0, 360, lo_open=False), default=None,
-                    help="comma-separated alpha_sigma [deg] in place of --step-q3/--step-other")
-    po.add_argument("--ramp-steps", type=opt.integer(0), default=5000)
-    po.add_argument("--max-steps", type=opt.integer(1), default=400_000,
-                    help="cap of a probe run [steps]: undecided when reached (about 20 "
-                         "windows: 400,000 at 1000 disks, 1,400,000 at 12,000)")
-    po.add_argument("--runaway-ratio", type=opt.real(1), default=100.0,
-                    help="failure: |de|/|de_elastic| beyond this with the wall stresses lost")
-    po.add_argument("--fail-ratio", type=opt.real(1), default=1000.0,
-                    help="failure: |de|/|de_elastic| beyond this")
-    po.add_argument("--threads", type=THREADS, default=None,
-                    help="threads of the relaxation (each probe runs on one); default: auto")
-    po.add_argument("--plastic-tol", type=opt.real(0), default=0.05)
-    po.add_argument("--relax-max-steps", type=opt.integer(1), default=2_000_000,
-                    help="cap of the relaxation of the state into the reference [steps]")
-    po.add_argument("--workers", type=opt.integer(1, 1024), default=None, help="local processes")
-    po.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
-
-    p = sub.add_parser("probes", parents=[po], help="directional analysis from a saved state")
-    p.add_argument("--state", required=True)
-    p.add_argument("--out", required=True)
-    p.add_argument("--no-relax", action="store_true",
-                    help="probe from the saved state as is (no stress-controlled relaxation)")
-    p.add_argument("--damping", type=opt.real(0, 1, lo_open=False), default=None,
-                    help="override the Cundall damping of the state (sensitivity check)")
-    p.add_argument("--params", default=None,
-                    help="DemParams file; refused unless it is the state's own (states carry theirs)")
-    p.add_argument("--resume", action="store_true",
-                    help="keep the runs already in DIR/probe_runs.jsonl (and DIR/stateR.npz) "
-                        "and run only the missing ones")
+    p = sub.add_parser("probes", help="directional analysis (stress probes) from a saved state "
+                                      "(Figs. 15-17)")
+    add(p, "--state", required=True, metavar="FILE")
+    opt.add_out(p)
+    _probe_parser_options(p)
+    add(p, "--no-relax")
+    add(p, "--damping", record="DemParams", note="overrides the state's (a sensitivity check)",
+        default_text="the state's")
+    add(p, "--params", metavar="FILE", note="refused unless it is the state's own (a state "
+        "carries its parameters)", default_text="the state's")
+    add(p, "--resume", note="the runs in --out/probe_runs.jsonl (and --out/stateR.npz); only the "
+        "missing ones run")
     opt.add_quiet(p)
     p.set_defaults(func=cmd_probes)
 
-    d = sub.add_parser("domain", parents=[po],
-                       help="the DEM's bifurcation domain: directional analyses of the states "
-                            "saved along a biaxial test")
-    d.add_argument("--biaxial", required=True, help="output folder of `dem biaxial`")
-    d.add_argument("--params", default=None,
-                    help="DemParams file; refused unless it is the states' own")
-    d.add_argument("--out", required=True)
-    d.add_argument("--states", default=None,
-                    help="comma-separated states (file names or targets of DIR/states/states.csv, "
-                        "e.g. f=0.9,f=0.95); default: all")
-    d.add_argument("--no-hmodel", action="store_true",
-                    help="leave the H-model's boundary out of the figure")
-    d.add_argument("--resume", action="store_true",
-                    help="keep the references and probe runs already in the output folder")
+    d = sub.add_parser("domain", help="the DEM's bifurcation domain: directional analyses of the "
+                                      "states saved along a biaxial test")
+    add(d, "--biaxial", required=True, metavar="DIR")
+    opt.add_out(d)
+    add(d, "--states", default_text="all")
+    _probe_parser_options(d)
+    add(d, "--params", metavar="FILE", note="refused unless it is the states' own",
+        default_text="the states'")
+    add(d, "--no-hmodel")
+    add(d, "--resume", note="the references and probe runs in --out")
     opt.add_quiet(d)
     d.set_defaults(func=cmd_domain)
 
-    u = sub.add_parser("burst", parents=[eq], help="failure made to happen: the proportional strain path "
+    u = sub.add_parser("burst", help="failure made to happen: the proportional strain path "
                                      "d eps2 = R d eps1 from states of a biaxial test and its "
                                      "conjugate stress c = s1 + R s2 held below and past its "
                                      "peak (docs/burst.md, docs/dem.md)")
-    u.add_argument("--biaxial", required=True, help="output folder of `dem biaxial` (its states)")
-    u.add_argument("--out", required=True)
-    u.add_argument("--ratios", type=_ratios, default=[-2.0],
-                   help="comma-separated R < 0 of the paths d eps2 = R d eps1 (-1: isochoric)")
-    u.add_argument("--start-fractions", type=opt.reals(0, 1, hi_open=False), default=[0.9],
-                   help="start states: fractions of the drained peak eta saved by `dem biaxial "
-                        "--save-fractions` (comma-separated)")
-    u.add_argument("--dc", type=opt.real(0, lo_open=False), default=100.0,
-                   help="the held step of c after the switch [Pa] (dG = W t dc)")
-    u.add_argument("--rate", type=opt.real(0, 10, hi_open=False), default=0.01,
-                   help="axial strain rate of the path [1/s]")
-    u.add_argument("--path-strain", type=opt.real(0, 0.5), default=0.03,
-                   help="the path ends this axial strain from its start without a c peak")
-    u.add_argument("--peak-drop", type=opt.real(0), default=150e3,
-                   help="c this far below its largest confirms the peak [Pa]")
-    u.add_argument("--peak-strain", type=opt.real(0, 0.5), default=5e-3,
-                   help="or the path this far beyond the largest c [-]")
-    u.add_argument("--below-rise", type=opt.real(0, 1), default=0.5,
-                   help="below: from the first equilibrium of the staircase whose c reaches "
-                        "c_start + this (c_peak - c_start), all at rest (0 < below-rise < 1)")
-    u.add_argument("--hold", choices=("dead_load", "servo"), default="dead_load",
-                   help="how G is held after the switch: a dead load on the tied walls (one "
-                        "dynamic degree of freedom, no servo) or the servo on c")
-    u.add_argument("--wall-mass", type=opt.real(0), default=None,
-                   help="the walls' generalized mass m_G under the dead load [kg] (default: the "
-                        "rule, their period on their contacts = --wall-period-steps steps)")
-    u.add_argument("--wall-period-steps", type=opt.real(20, lo_open=False), default=200.0,
-                   help="the wall-mass rule: the walls' period on their contact stiffness in "
-                        "time steps (>= 20)")
-    u.add_argument("--relax-max-steps", type=opt.integer(1), default=1_000_000,
-                   help="cap of a relaxation at fixed strain [steps] (at least two equilibrium "
-                        "windows)")
-    u.add_argument("--stairs", type=opt.integer(1), default=8,
-                   help="the staircase's first step of c: (loaded peak - c at rest) / this")
-    u.add_argument("--max-holds", type=opt.integer(2), default=40,
-                   help="cap of the staircase's holds (the search then ends without a past run)")
-    u.add_argument("--probe-d-eps1", type=opt.real(0, 1e-3, hi_open=False), default=1e-5,
-                   help="the kinematic probe at every equilibrium: axial strain moved along the "
-                        "path, 0 < value <= 1e-3 [-] (default 1e-5; docs/burst.md: the rule)")
-    u.add_argument("--probe-rate", type=opt.real(0, 10, hi_open=False), default=1e-3,
-                   help="the probe's axial strain rate [1/s], 0 < value <= --rate (default 0.001)")
-    u.add_argument("--no-probes", action="store_true",
-                   help="no kinematic probes (no k_path, no verdict of the theory)")
-    u.add_argument("--resume", action="store_true",
-                   help="keep the paths, relaxations and holds already in DIR (burst_runs.jsonl, "
-                        "rest/)")
-    u.add_argument("--scheduler", default=None,
-                   help="dask.distributed scheduler address: the runs go to its workers")
-    u.add_argument("--max-steps", type=opt.integer(1), default=1_000_000,
-                   help="cap of a switched run [steps]: undecided when reached")
-    u.add_argument("--fail-strain", type=opt.real(0, 1), default=0.01,
-                   help="failure: |d eps| since the switch beyond this [-]")
-    u.add_argument("--workers", type=opt.integer(1, 1024), default=None,
-                   help="local processes (the paths, then each path's rest search and its runs; one "
-                        "thread each)")
-    u.add_argument("--threads", type=THREADS, default=None,
-                   help="threads of a run alone in the process (results do not depend on it); "
-                        "default: auto")
-    u.add_argument("--params", default=None,
-                   help="DemParams file; refused unless it is the states' own")
-    opt.add_quiet(u)
+    BO = "BurstOptions"
+    add(u, "--biaxial", required=True, metavar="DIR")
+    opt.add_out(u)
+    g = u.add_argument_group("the paths and the switch")
+    add(g, "--ratios", [-2.0], parse=_ratios)
+    add(g, "--start-fractions", [0.9], note="among those dem biaxial --save-fractions saved")
+    add(g, "--dc", 100.0, record=BO, note="dG = W t dc")
+    add(g, "--rate", 0.01, record=BO, note="of the path")
+    add(g, "--path-strain", 0.03, record=BO, note="the path ends there without a c peak")
+    add(g, "--peak-drop", 150e3, record=BO)
+    add(g, "--peak-strain", 5e-3, record=BO)
+    add(g, "--below-rise", 0.5, record=BO)
+    add(g, "--hold", "dead_load", record=BO, choices=("dead_load", "servo"))
+    add(g, "--wall-mass", record=BO, default_text="the rule: the walls' period on their "
+        "contacts = --wall-period-steps steps")
+    add(g, "--wall-period-steps", 200.0, record=BO)
+    add(g, "--relax-max-steps", 1_000_000, record=BO, note="at least two equilibrium windows")
+    add(g, "--stairs", 8, record=BO)
+    add(g, "--max-holds", 40, record=BO)
+    add(g, "--probe-d-eps1", 1e-5, record=BO)
+    add(g, "--probe-rate", 1e-3, record=BO)
+    add(g, "--no-probes")
+    add(g, "--max-steps", 1_000_000, record=BO, note="of a switched run")
+    add(g, "--fail-strain", 0.01, record=BO)
+    _equilibrium_options(u, BO)
+    g = u.add_argument_group("the run")
+    add(g, "--resume", note="the paths, relaxations and holds in --out (burst_runs.jsonl, rest/)")
+    add(g, "--scheduler", default_text="none (local processes)")
+    add(g, "--workers", default_text="the cores", note="the paths, then each path's rest search "
+        "and its runs; one thread each")
+    add(g, "--threads", default_text="auto (dem.threads)", note="of a run alone in the process")
+    add(g, "--params", metavar="FILE", note="refused unless it is the states' own",
+        default_text="the states'")
+    opt.add_quiet(g)
     u.set_defaults(func=cmd_burst)
 
-    q = sub.add_parser("params", help="write a DemParams file (the paper's set, or the options given)")
+    q = sub.add_parser("params", help="write a DemParams file (the paper's set, or the options "
+                                      "given)")
     add_param_options(q)
-    q.add_argument("--out", required=True, help="the JSON file to write")
+    opt.add_out(q, "file")
     q.set_defaults(func=cmd_params)
 
     c = sub.add_parser("bench", help="particle-steps/s on a dense confined sample")
     add_param_options(c)
-    c.add_argument("--steps", type=opt.integer(1), default=2000)
-    c.add_argument("--cache", default=os.path.join(os.path.expanduser("~"), ".cache", "dem"))
-    c.add_argument("--rounds", type=opt.integer(1, 100), default=1, help="interleaved rounds")
-    c.add_argument("--busy-core", action="store_true",
-                    help="measure beside a busy-loop process (a shared machine)")
+    add(c, "--steps", 2000)
+    add(c, "--cache", os.path.join(os.path.expanduser("~"), ".cache", "dem"), metavar="DIR")
+    add(c, "--rounds", 1)
+    add(c, "--busy-core")
     c.set_defaults(func=cmd_bench)
 
     from .calibrate import DEFAULT_VARY, TARGETS, bounds_type, seeds_type, vary_type
@@ -486,84 +452,77 @@ def build_parser() -> opt.Parser:
                                    "search that stops when they are met or when its model of "
                                    "the figures shows that no set within the bounds can meet "
                                    "them. See docs/dem.md.")
-    add_param_options(k)
-    k.add_argument("--target", choices=TARGETS, default="hmodel",
-                   help="the curve to fit: the H-model, Table I, at --confining")
-    k.add_argument("--out", required=True)
-    k.add_argument("--vary", type=vary_type, default=DEFAULT_VARY,
-                   help="comma-separated DemParams float fields (or their option names, "
-                        "friction = friction_deg) to fit (default: %(default)s)")
-    k.add_argument("--bounds", type=bounds_type, default=None,
-                   help="search ranges NAME=LO:HI,... (default: kn_over_d 2e9:32e9 log, "
-                        "friction 10:50, kt_over_kn 0.2:1, rolling_friction 0:0.3, "
-                        "rolling_stiffness 0.25:4 log; others 0.5-2 x the start value)")
-    k.add_argument("--seeds", type=seeds_type, default=(1, 2),
-                   help="samples every set is run on; its figures are their means "
-                        "(default: 1,2)")
-    k.add_argument("--check-seeds", type=seeds_type, default=(3,),
-                   help="samples the best set is then run on, not among --seeds (default: 3)")
-    k.add_argument("--initial", type=opt.integer(3, 4096), default=16,
-                   help="sets of the space-filling (Sobol) design before the model proposes "
-                        "any (at least the number of varied parameters + 2)")
-    k.add_argument("--batch", type=opt.integer(1, 64), default=1,
-                   help="sets the model proposes per round")
-    k.add_argument("--max-evals", type=opt.integer(1, 100_000), default=32,
-                   help="parameter sets at most, the start set included, each run on every "
-                        "seed (may be raised on --resume)")
-    k.add_argument("--rate", type=opt.real(0, 10), default=0.01, help="axial strain rate [1/s]")
-    k.add_argument("--confining", type=opt.real(0, 1e9), default=200e3, help="[Pa]")
-    k.add_argument("--eps-max", type=opt.real(0.005, 0.5, lo_open=False), default=0.035,
-                   help="end of each test (also ends post-peak-strain after its peak)")
-    k.add_argument("--post-peak-strain", type=opt.real(0, 0.5), default=0.01,
-                   help="a test stops this strain after its peak (q below 0.98 of it)")
-    k.add_argument("--smooth", type=opt.real(0, 0.05, lo_open=False), default=0.001,
-                   help="strain window of the moving average of q for the peak (0: raw)")
-    k.add_argument("--workers", type=opt.integer(1, 1024), default=None,
-                   help="local processes (each evaluation runs on one thread)")
-    k.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
-    k.add_argument("--resume", action="store_true",
-                   help="take every evaluation already in DIR/evaluations.jsonl, run the rest")
-    opt.add_quiet(k)
+    opt.add_out(k)
+    add_param_options(k, n_text="the file's, else 2000")
+    g = k.add_argument_group("the fit")
+    add(g, "--target", "hmodel", choices=TARGETS, note="the H-model's, Table I, at --sigma2")
+    add(g, "--vary", DEFAULT_VARY, parse=vary_type)
+    add(g, "--bounds", parse=bounds_type, default_text="kn_over_d 2e9:32e9 log, phi_g 10:50, "
+        "kt_over_kn 0.2:1, rolling_friction 0:0.3, rolling_stiffness 0.25:4 log; others 0.5-2 x "
+        "the start value")
+    add(g, "--seeds", (1, 2), parse=seeds_type)
+    add(g, "--check-seeds", (3,), parse=seeds_type)
+    add(g, "--initial", 16)
+    add(g, "--batch", 1)
+    add(g, "--max-evals", 32)
+    g = k.add_argument_group("each test")
+    add(g, "--rate", 0.01)
+    add(g, "--sigma2", 200e3)
+    add(g, "--eps1-max", 0.035, note="at least 0.005; also ends --post-peak-strain after the "
+        "peak")
+    add(g, "--post-peak-strain", 0.01, note="with q below 0.98 of it")
+    add(g, "--smooth", 0.001)
+    g = k.add_argument_group("the run")
+    add(g, "--workers", default_text="the cores", note="each evaluation runs on one thread")
+    add(g, "--scheduler", default_text="none (local processes)")
+    add(g, "--resume", note="every evaluation in --out/evaluations.jsonl is taken")
+    opt.add_quiet(g)
     k.set_defaults(func=cmd_calibrate)
 
     x = sub.add_parser("crosscheck", help="H-model, FE and DEM side by side (report.md + figures)")
-    x.add_argument("--out", required=True)
-    x.add_argument("--dem-params", default=None,
-                    help="DemParams file of the DEM sample (default: the paper's stated set)")
-    x.add_argument("--hmodel-params", default=None,
-                    help="HParams file of the H-model and FE parts (python -m hmodel params; "
-                         "default Table I; both at 200 kPa, the FE at 72 orientations)")
-    x.add_argument("--full", action="store_true", help="the paper's 12,000 disks at 0.01/s (see README for the time)")
-    x.add_argument("--n", type=opt.integer(2, 10_000_000), default=None, help="DEM disks (default 1000, 12000 with --full)")
-    x.add_argument("--seed", type=opt.integer(0), default=1)
-    x.add_argument("--rate", type=opt.real(0, 10), default=None, help="DEM axial strain rate [1/s] (0.05, 0.01 with --full)")
-    x.add_argument("--max-steps", type=opt.integer(1), default=None, help="cap of each DEM probe run [steps]")
-    x.add_argument("--workers", type=opt.integer(1, 1024), default=None,
-                   help="local processes for the DEM's relaxations and probes")
-    x.add_argument("--scheduler", default=None,
-                   help="dask.distributed scheduler address for the DEM's relaxations and probes "
-                        "(one task a run)")
-    x.add_argument("--skip-dem", action="store_true", help="H-model and FE only")
-    x.add_argument("--no-domain", action="store_true", help="skip the H-model bifurcation domain")
-    x.add_argument("--threads", type=THREADS, default=None,
-                    help="threads of the DEM compaction, biaxial test and relaxations "
-                        "(results do not depend on it); default: auto, see dem.threads")
-    x.add_argument("--resume", action="store_true",
-                    help="keep the DEM work an interrupted run left in DIR/dem and do the rest")
-    x.add_argument("--dem-domain", action=argparse.BooleanOptionalAction, default=None,
-                    help="directional analyses at every saved DEM state (the DEM's bifurcation "
-                         "domain); default: on, off with --full (use `dem domain` there)")
-    x.add_argument("--no-burst", action="store_true",
-                   help="skip the burst section (proportional strain paths, c held below / past "
-                        "its peak, in the three parts: docs/burst.md)")
-    x.add_argument("--burst-ratios", type=opt.reals(unit="-"), default=None,
-                   help="R of the burst section's paths, each finite and < 0 (default -2)")
-    x.add_argument("--burst-fractions", type=opt.reals(0, 1), default=None,
-                   help="start states of the burst section, fractions of each part's drained "
-                        "peak eta, 0 < f < 1, among the DEM's saved ones (default 0.90)")
+    opt.add_out(x)
+    add(x, "--dem-params", metavar="FILE", default_text="the paper's stated set")
+    add(x, "--hmodel-params", metavar="FILE", default_text="Table I; both at 200 kPa, the FE at "
+        "72 orientations")
+    add(x, "--full")
+    add(x, "--n", default_text="1000, 12000 with --full", note="of the DEM sample")
+    add(x, "--seed", 1, note="of the DEM sample")
+    add(x, "--rate", default_text="0.05, 0.01 with --full", note="of the DEM's biaxial test")
+    add(x, "--max-steps", default_text="the probes'", note="of each DEM probe run")
+    add(x, "--workers", default_text="the cores", note="for the DEM's relaxations and probes")
+    add(x, "--scheduler", default_text="none (local processes)",
+        note="for the DEM's relaxations and probes (one task a run)")
+    add(x, "--no-dem")
+    add(x, "--no-domain")
+    add(x, "--threads", default_text="auto (dem.threads)",
+        note="of the DEM compaction, biaxial test and relaxations")
+    add(x, "--resume", note="the DEM work an interrupted run left in --out/dem")
+    add(x, "--dem-domain", default_text="on, off with --full (use dem domain there)")
+    add(x, "--no-burst")
+    add(x, "--ratios", parse=_ratios, note="of the burst section", default_text="-2")
+    add(x, "--start-fractions", note="of the burst section, of each part's drained peak eta, "
+        "among the DEM's saved ones", default_text="0.9")
     opt.add_quiet(x)
     x.set_defaults(func=cmd_crosscheck)
     return ap
+
+
+BIAXIAL_FOLDER = "the output folder of python -m dem biaxial (its states/ and summary.json)"
+STATE_FILE = ("a DEM state file: an .npz written by python -m dem biaxial (its stateA.npz or "
+              "states/state_f*.npz)")
+
+
+def check_state(path, option="--state"):
+    """A DEM state file, or an OptionError of one line naming what a state file is."""
+    from . import io
+    opt.check_file(path, option, STATE_FILE)
+    try:
+        io.load_state(path)
+    except ValueError as e:
+        why = str(e)
+        head = f"state file {path}"
+        why = why[len(head):].lstrip(":, ") if why.startswith(head) else why
+        raise opt.OptionError(f"{option} {path}: {why}; allowed {STATE_FILE}") from None
 
 
 def main(argv=None):
@@ -572,6 +531,8 @@ def main(argv=None):
             opt.check_out_file(a.out)
         elif hasattr(a, "out"):
             opt.check_out_dir(a.out)
+        if getattr(a, "cache", None):
+            opt.check_out_dir(a.cache, "--cache")
         # a bad parameter file or option is refused before the compilation
         from .params import load_params
         if hasattr(a, "kn_over_d"):          # a command of add_param_options
@@ -588,20 +549,29 @@ def main(argv=None):
         if getattr(a, "scheduler", None):
             from .probes import check_scheduler
             check_scheduler(a.scheduler)
+        if getattr(a, "threads", None) is not None:
+            from .threads import check_threads
+            check_threads(a.threads)
         if getattr(a, "directions", None):
             _directions(a)            # bad input before the compilation
+        if a.cmd in ("probes", "domain"):
+            _probe_options(a)
+        if getattr(a, "damping", None) is not None and a.cmd == "probes":
+            from .params import DemParams
+            try:
+                DemParams().replace(damping=a.damping)
+            except ValueError as e:
+                raise opt.record_error(e, "DemParams") from None
         if getattr(a, "state", None):
-            from . import io
-            io.load_state(a.state)    # a missing or foreign state file, before the compilation
+            check_state(a.state)      # a missing or foreign state file, before the compilation
         if a.cmd == "crosscheck" and not a.no_burst:
-            from .burst import check_ratio
             from .experiment import SAVE_FRACTIONS
-            for r in a.burst_ratios or ():
-                check_ratio(r, "--burst-ratios")
-            bad = [f for f in a.burst_fractions or () if f not in SAVE_FRACTIONS]
-            if bad and not a.skip_dem:
-                raise opt.OptionError(f"--burst-fractions {bad}: allowed fractions the DEM's "
+            bad = [f for f in a.start_fractions or () if f not in SAVE_FRACTIONS]
+            if bad and not a.no_dem:
+                raise opt.OptionError(f"--start-fractions {bad}: allowed fractions the DEM's "
                                       f"biaxial test saves, {list(SAVE_FRACTIONS)}")
+        if getattr(a, "biaxial", None):
+            opt.check_folder(a.biaxial, "--biaxial", BIAXIAL_FOLDER, ("python -m dem biaxial",))
         if a.cmd == "burst":
             from .burst import load_starts
             _burst_options(a)         # bad options and input files before the compilation

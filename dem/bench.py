@@ -31,7 +31,8 @@ def confined_sample(n=12000, seed=1, cache_dir=None, params=None):
     if params != DemParams(n=params.n, seed=params.seed):
         import hashlib
         import json
-        tag += "_" + hashlib.sha256(json.dumps(params.to_dict(), sort_keys=True).encode()).hexdigest()[:10]
+        from .params import hashed_dict     # friction_deg, as before phi_g: the cache stays
+        tag += "_" + hashlib.sha256(json.dumps(hashed_dict(params), sort_keys=True).encode()).hexdigest()[:10]
     path = os.path.join(cache_dir, tag + ".npz") if cache_dir else None
     if path and os.path.exists(path):
         try:
@@ -161,7 +162,7 @@ def write_lammps(state, out_dir, steps):
     os.makedirs(out_dir, exist_ok=True)
     with open(os.path.join(out_dir, "sample.data"), "w") as f:
         f.write("\n".join(lines) + "\n")
-    mu = math.tan(math.radians(p.friction_deg))
+    mu = math.tan(math.radians(p.phi_g))
     inp = f"""# dem bench sample in LAMMPS: same contact law, masses, inertia, dt and skin
 units si
 dimension 2

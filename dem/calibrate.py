@@ -60,7 +60,7 @@ import time
 
 import numpy as np
 
-from .params import OPTIONS, DemParams, record_params, save_params
+from .params import OPTIONS, RENAMED, DemParams, migrate, record_params, save_params
 
 TOLERANCES = {"peak_q": 0.05, "eps1_95": 0.25, "secant": 0.20}
 PEAK_FRACTION = 0.95     # eps1_95: the first strain where q reaches this fraction of its peak
@@ -68,14 +68,14 @@ FIGURE_TEXT = {"peak_q": "peak q", "eps1_95": "eps1 at 95 % of the peak",
                "secant": "secant modulus q/eps1 at eps1 = 0.25 %"}
 SECANT_STRAIN = 0.0025
 TARGETS = ("hmodel",)
-DEFAULT_VARY = "kn_over_d,friction,rolling_friction"
+DEFAULT_VARY = "kn_over_d,phi_g,rolling_friction"
 # float fields that are numerical settings, not material parameters: never calibrated
 NUMERICAL = ("thickness", "damping", "normal_damping_ratio", "dt_safety", "skin_factor",
              "servo_gain", "servo_smoothing", "servo_vmax")
 # default search range (lo, hi, logarithmic) of the usual fields
 # (friction from 10 deg: the one set known to meet the targets before issue 27 had 15 deg with
 # rolling resistance 0.2, which raises the strength as friction would)
-DEFAULT_BOUNDS = {"kn_over_d": (2e9, 32e9, True), "friction_deg": (10.0, 50.0, False),
+DEFAULT_BOUNDS = {"kn_over_d": (2e9, 32e9, True), "phi_g": (10.0, 50.0, False),
                   "kt_over_kn": (0.2, 1.0, False), "rolling_friction": (0.0, 0.3, False),
                   "rolling_stiffness": (0.25, 4.0, True)}
 LOG_FIELDS = ("kn_over_d", "rolling_stiffness", "r_min", "r_max", "density")
@@ -179,7 +179,7 @@ def calibratable_fields():
 
 
 def _aliases():
-    """Command-line names of fields (``friction`` -> ``friction_deg``, from dem.params.OPTIONS)."""
+    """Command-line names of fields (``kn-over-d`` -> ``kn_over_d``, from dem.params.OPTIONS)."""
     return {o[2:].replace("-", "_"): f for o, f in OPTIONS.items()}
 
 
@@ -193,6 +193,9 @@ def resolve_field(name):
     f = _aliases().get(name, name)
     if f in calibratable_fields():
         return f
+    new = {"friction": "phi_g", **RENAMED}.get(name)
+    if new is not None:
+        raise ValueError(f"{name}: renamed {new} (as the option --phi-g): did you mean {new}?")
     names = {x.name for x in dataclasses.fields(DemParams)}
     why = ("is not a float material parameter of DemParams (an integer or a numerical setting)"
            if f in names else "is not a field of DemParams in this version")
@@ -780,11 +783,11 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
             ("--check-seeds", check_seeds, not set(check_seeds) & set(seeds),
              "seeds not in --seeds (a check on a seed the fit did not see)"),
             ("--rate", rate, rate > 0, "value > 0 [1/s]"),
-            ("--confining", confining, confining > 0, "value > 0 [Pa]"),
-            ("--eps-max", eps_max, 2 * SECANT_STRAIN <= eps_max < 0.5,
+            ("--sigma2", confining, confining > 0, "value > 0 [Pa]"),
+            ("--eps1-max", eps_max, 2 * SECANT_STRAIN <= eps_max < 0.5,
              f"{2 * SECANT_STRAIN:g} <= value < 0.5"),
             ("--post-peak-strain", post_peak_strain, 0 < post_peak_strain < eps_max,
-             "0 < value < --eps-max"),
+             "0 < value < --eps1-max"),
             ("--smooth", smooth, 0 <= smooth < 0.05, "0 <= value < 0.05")):
         if not ok or (isinstance(val, float) and not math.isfinite(val)):
             raise ValueError(f"{name} {val!r}: allowed {rng}")
@@ -801,7 +804,7 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
     hfig = curve_figures(hcurve["eps1"], hcurve["q"], 0.0)
     if hfig["eps1_peak"] >= 0.98 * hcurve["eps1"][-1]:
         raise RuntimeError(f"the {target}'s curve has no peak before eps1 = "
-                           f"{hcurve['eps1'][-1]:g} at --confining {confining:g}")
+                           f"{hcurve['eps1'][-1]:g} at --sigma2 {confining:g}")
     _say(verbose, f"[calibrate] target {target}: peak q = {hfig['peak_q'] / 1e3:.1f} kPa (at "
                   f"eps1 = {100 * hfig['eps1_peak']:.2f} %), {PEAK_FRACTION:.0%} of it first at "
                   f"eps1 = {100 * hfig['eps1_95']:.3f} %, secant at {100 * SECANT_STRAIN:g} % = "
@@ -1184,6 +1187,7 @@ def current_params(d: dict) -> dict:
     """A parameter dict written by an earlier version, with the DemParams fields added since at
     their defaults (a new field's default keeps the earlier behaviour, e.g. rolling_friction 0 =
     free rotation), so that a checkpoint made before a field existed still matches."""
+    d = migrate(d)
     missing = {f.name: f.default for f in dataclasses.fields(DemParams) if f.name not in d}
     return {**missing, **d}
 
@@ -1203,6 +1207,10 @@ def read_checkpoint(path, header):
                          "--out") from None
     if isinstance(head.get("start_params"), dict):
         head["start_params"] = current_params(head["start_params"])
+    if isinstance(head.get("vary"), list):         # fields renamed since (friction_deg: phi_g)
+        head["vary"] = [RENAMED.get(v, v) for v in head["vary"]]
+    if isinstance(head.get("bounds"), dict):
+        head["bounds"] = migrate(head["bounds"])
     diff = [k for k in sorted(set(head) | set(header))
             if k not in RESUME_FREE and head.get(k) != header.get(k)]
     if diff:

@@ -491,7 +491,8 @@ def main(argv=None) -> int:
     ap.add_argument("--starts", type=opt.integer(1), default=8, help="starts of the fit")
     ap.add_argument("--seed", type=opt.integer(0), default=0, help="seed of the starts")
     ap.add_argument("--n-dir", type=opt.integer(8), default=180, help="hexagon orientations of the H-model")
-    ap.add_argument("--n", type=opt.integer(8), default=360, help="strain directions of each sweep")
+    ap.add_argument("--n-probes", type=opt.integer(8), default=360,
+                    help="strain directions of each sweep [-] (default 360)")
     opt.add_quiet(ap)
 
     def run(args, stage):
@@ -521,7 +522,8 @@ def main(argv=None) -> int:
         f_a = bounds["lower_eta_fraction"]
         eta_a = float(f_a * e.max())
         pargs = param_argv(P) + ["--sigma2", repr(P.p0)]
-        for sub, extra in (("probes", ["--eta", repr(eta_a), "--n", str(args.n)]), ("domain", ["--n", "180"])):
+        for sub, extra in (("probes", ["--eta-a", repr(eta_a), "--n-probes", str(args.n_probes)]),
+                           ("domain", ["--n-probes", "180"])):
             argv_ = [sub, *extra, *pargs, "--out", os.path.join(args.out, sub)] + common[2:]
             log("python -m hmodel " + " ".join(argv_))
             stage.at(f"python -m hmodel {sub}")
@@ -530,7 +532,7 @@ def main(argv=None) -> int:
                 return code
             stage.wrote(f"{sub}/")
         stage.at("the comparison")
-        c = compare(P, rows, bounds, dem_probes, n=args.n, progress=log)
+        c = compare(P, rows, bounds, dem_probes, n=args.n_probes, progress=log)
         dem_curve = read_csv(os.path.join(args.dem, "biaxial.csv"))
         kd = int(np.argmax(dem_curve["q"]))
         c["dem_q_peak"], c["dem_eps1_peak"] = float(dem_curve["q"][kd]), float(dem_curve["eps1"][kd])

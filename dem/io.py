@@ -98,7 +98,10 @@ def load_state(path) -> tuple[State, dict]:
     """Read a state file.  ValueError if it is missing, truncated, not a DEM state, or of
     another format version (allowed: READ_VERSIONS)."""
     if not os.path.isfile(path):
-        raise ValueError(f"state file {path}: no such file")
+        raise ValueError(f"state file {path}: " + ("a folder" if os.path.isdir(path)
+                                                    else "no such file"))
+    if not zipfile.is_zipfile(path):      # np.load would try pickle and advise allow_pickle
+        raise ValueError(f"state file {path}: not a DEM state (not an .npz archive)")
     try:
         with np.load(path, allow_pickle=False) as z:
             missing = [k for k in _KEYS if k not in z.files]

@@ -4,6 +4,9 @@ All values are SI (m, kg, s, N, Pa).  Defaults are the paper's sample:
 12,000 disks, radii uniform in [3, 14] mm, kn/D = 32 GPa (D = mean diameter),
 kt/kn = 0.42, interparticle friction 35 deg, density 2600 kg/m^3 (not given in
 the paper), out-of-plane thickness 1 m.
+
+The grain friction angle is ``phi_g`` (option ``--phi-g``), as in the H-model; files and states
+written before it was (``friction_deg``) load all the same (``RENAMED``, ``migrate``).
 """
 from __future__ import annotations
 
@@ -31,7 +34,7 @@ class DemParams:
       thickness              out-of-plane length of the disks [m]
       kn_over_d              normal stiffness / mean diameter [Pa]; kn = kn_over_d * (r_min + r_max)
       kt_over_kn             tangential / normal stiffness ratio [-]
-      friction_deg           interparticle friction angle [deg], mu = tan(friction)
+      phi_g                  grain (interparticle) friction angle [deg], mu = tan(phi_g)
       damping                Cundall non-viscous damping coefficient lambda [-]
       normal_damping_ratio   viscous dashpot in the normal direction as a fraction of the
                              critical damping of the two-disk system [-] (0 = none; used by tests)
@@ -55,7 +58,7 @@ class DemParams:
     thickness: float = 1.0
     kn_over_d: float = 32e9
     kt_over_kn: float = 0.42
-    friction_deg: float = 35.0
+    phi_g: float = 35.0
     damping: float = 0.15
     normal_damping_ratio: float = 0.0
     dt_safety: float = 0.2
@@ -79,8 +82,7 @@ class DemParams:
         _check("kn_over_d", self.kn_over_d, self.kn_over_d > 0 and math.isfinite(self.kn_over_d),
                "kn_over_d > 0 [Pa]")
         _check("kt_over_kn", self.kt_over_kn, 0 < self.kt_over_kn < math.inf, "kt_over_kn > 0")
-        _check("friction_deg", self.friction_deg, 0 <= self.friction_deg < 90,
-               "0 <= friction_deg < 90 [deg]")
+        _check("phi_g", self.phi_g, 0 <= self.phi_g < 90, "0 <= phi_g < 90 [deg]")
         _check("damping", self.damping, 0 <= self.damping < 1, "0 <= damping < 1")
         _check("normal_damping_ratio", self.normal_damping_ratio,
                0 <= self.normal_damping_ratio < 1, "0 <= normal_damping_ratio < 1")
@@ -116,7 +118,7 @@ class DemParams:
 
     @property
     def mu(self) -> float:
-        return math.tan(math.radians(self.friction_deg))
+        return math.tan(math.radians(self.phi_g))
 
     @property
     def skin(self) -> float:
@@ -141,7 +143,9 @@ class DemParams:
     @classmethod
     def from_dict(cls, d: dict) -> "DemParams":
         """The parameters of a state or parameter file: every field, nothing else (ValueError
-        naming the unknown or missing keys; no default is filled in silently)."""
+        naming the unknown or missing keys; no default is filled in silently). A key renamed
+        since (``RENAMED``) is read under its new name."""
+        d = migrate(d)
         names = {f.name for f in fields(cls)}
         unknown, missing = sorted(set(d) - names), sorted(names - set(d))
         if unknown or missing:
@@ -153,15 +157,47 @@ class DemParams:
         return cls(**d)
 
 
-# The command-line options of the main parameters: option -> field of DemParams
-OPTIONS = {"--n": "n", "--seed": "seed", "--r-min": "r_min", "--r-max": "r_max",
-           "--density": "density", "--kn-over-d": "kn_over_d", "--kt-over-kn": "kt_over_kn",
-           "--friction": "friction_deg", "--damping": "damping", "--dt-safety": "dt_safety",
-           "--rolling-friction": "rolling_friction", "--rolling-stiffness": "rolling_stiffness"}
+# keys of DemParams renamed: former key -> field (parameter files, states, checkpoints)
+RENAMED = {"friction_deg": "phi_g"}
+
+
+def migrate(d: dict) -> dict:
+    """A parameter dict (or a parameter file's, with its "units") with its former keys
+    (``RENAMED``) under their new names; a dict holding both is left as it is (refused later
+    as having an unknown key)."""
+    if not isinstance(d, dict) or not any(k in d for k in RENAMED):
+        return d
+    out = {}
+    for k, v in d.items():
+        new = RENAMED.get(k)
+        out[new if new is not None and new not in d else k] = v
+    if isinstance(out.get("units"), dict):
+        out["units"] = migrate(out["units"])
+    return out
+
+
+def hashed_dict(params) -> dict:
+    """``params.to_dict()`` under the keys of before their renaming (``RENAMED``), in the same
+    order: what a fingerprint or a cache key hashes, so that those of runs made before a
+    renaming stay valid (a resumed probe sweep, a cached bench sample)."""
+    old = {new: old for old, new in RENAMED.items()}
+    return {old.get(k, k): v for k, v in params.to_dict().items()}
+
+
+def _options():
+    from hmodel.options import VOCABULARY
+    found = {f.split(".", 1)[1]: t.name for t in VOCABULARY.values() for f in t.fields
+             if f.startswith("DemParams.")}
+    return {found[f.name]: f.name for f in fields(DemParams) if f.name in found}
+
+
+# The command-line options of the main parameters: option -> field of DemParams (the terms of
+# the vocabulary, hmodel.options.VOCABULARY, checked by DemParams)
+OPTIONS = _options()
 
 # the unit of every field, as a parameter file records it (hmodel.paramfile)
 UNITS = {"n": "-", "r_min": "m", "r_max": "m", "density": "kg/m^3", "thickness": "m",
-         "kn_over_d": "Pa", "kt_over_kn": "-", "friction_deg": "deg", "damping": "-",
+         "kn_over_d": "Pa", "kt_over_kn": "-", "phi_g": "deg", "damping": "-",
          "normal_damping_ratio": "-", "dt_safety": "-", "skin_factor": "-", "servo_gain": "-",
          "servo_smoothing": "-", "servo_vmax": "m/s", "seed": "-", "rolling_friction": "-",
          "rolling_stiffness": "-"}
@@ -176,9 +212,9 @@ def save_params(path, params: DemParams, note: str | None = None) -> None:
 def load_params(path, option: str = "--params") -> DemParams:
     """DemParams from a parameter file (as ``python -m dem params`` writes it, or a file of
     every field and nothing else, the format before units); ValueError of one line naming the
-    file and the key."""
+    file and the key. A key renamed since (friction_deg: phi_g) is read under its new name."""
     from hmodel.paramfile import read_params
-    return read_params(path, DemParams, "dem", UNITS, option=option)
+    return read_params(path, DemParams, "dem", UNITS, option=option, migrate=migrate)
 
 
 def record_params(out_dir, params: DemParams, note: str = "") -> str:
@@ -193,7 +229,8 @@ def params_from_args(a) -> DemParams:
     """The parameters of a command: ``a.params`` (a parameter file) or the paper's set, with
     every main-parameter option given on the command line (not None) on top. Sets
     ``a.params_note``, the line of the run's summary that says where the values came from
-    ("parameters: the file p.json; --friction 30 overrides the file's friction_deg 35")."""
+    ("parameters: the file p.json; --phi-g 30 overrides the file's phi_g 35"). An option out of
+    range is one line naming it and its range (DemParams checks it)."""
     from hmodel.paramfile import override
     path = getattr(a, "params", None)
     base = load_params(path) if path else DemParams()
@@ -203,6 +240,7 @@ def params_from_args(a) -> DemParams:
         P, note = override(base, given, f"the file {path}" if path else "the paper's set (defaults)",
                            base.replace)
     except ValueError as e:
-        raise ValueError(f"{e} (from the options {', '.join(o for o, _, _ in given)})") from None
+        from hmodel.options import record_error
+        raise record_error(e, "DemParams") from None
     a.params_note = note
     return P

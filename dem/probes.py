@@ -279,7 +279,8 @@ def state_fingerprint(state: State) -> str:
               state.prev, state.x_ref, state.pi, state.pj, state.ft) + (
                   (state.mr,) if rolling else ()) + (state.ref_len,):
         h.update(np.ascontiguousarray(a).tobytes())
-    params = state.params.to_dict()
+    from .params import hashed_dict
+    params = hashed_dict(state.params)       # friction_deg, as before phi_g: resumes stay valid
     if not rolling:
         params = {k: v for k, v in params.items()
                   if k not in ("rolling_friction", "rolling_stiffness")}

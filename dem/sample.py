@@ -86,7 +86,7 @@ def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.
             verbose=False):
     """Generate and compact a sample isotropically to `stress` [Pa].
 
-    Friction is `friction_deg` during compaction, then restored to params.friction_deg and
+    Friction is `friction_deg` during compaction, then restored to params.phi_g and
     the sample re-equilibrated at the same stress.  The servo runs with a higher Cundall
     damping and wall speed cap during compaction only (faster; the final state is
     re-equilibrated with the nominal values).  Returns (Simulation, CompactionReport).

@@ -1,5 +1,5 @@
-"""Command line: ``python -m fem biaxial --nx 10 --ny 20 --out DIR`` (thin argparse over
-fem.biaxial.run_biaxial)."""
+"""Command line: ``python -m fem biaxial|burst ... --out DIR`` (over fem.biaxial.run_biaxial
+and fem.burst.run_burst), its options from the vocabulary of ``hmodel.options``."""
 from __future__ import annotations
 
 import argparse
@@ -37,49 +37,60 @@ def _opt_float(s):
     return None if s.lower() == "none" else opt.real()(s)
 
 
+_opt_float.__name__ = "real or none"
+
+
 def _specimen_options(sub, d: BiaxialConfig, eps1_max: bool):
     """The options both commands share: mesh, loading (``--eps1-max`` with ``eps1_max``),
     material, imperfection, and the Newton options in the group "solver and output", which is
-    returned for the command's own output options."""
-    R = opt.real
+    returned for the command's own output options. The values are checked by BiaxialConfig
+    (``check_config``), the material by HParams."""
+    add = opt.add
+    BC = "BiaxialConfig"
     g = sub.add_argument_group("mesh")
-    g.add_argument("--nx", type=opt.integer(1), default=d.nx, help="cells across the width (default %(default)s)")
-    g.add_argument("--ny", type=opt.integer(1), default=d.ny, help="cells along the height (default %(default)s)")
-    g.add_argument("--width", type=R(0, unit="m"), default=d.width, help="B [m] (default %(default)s)")
-    g.add_argument("--height", type=R(0, unit="m"), default=d.height, help="H [m] (default %(default)s)")
-    g.add_argument("--mesh", dest="mesh_kind", choices=["quad", "tri"], default=d.mesh_kind)
-    g.add_argument("--mesh-file", default=None, help="meshio-readable triangle/quad mesh (overrides --nx ...)")
+    add(g, "--nx", d.nx, record=BC)
+    add(g, "--ny", d.ny, record=BC)
+    add(g, "--width", d.width, record=BC)
+    add(g, "--height", d.height, record=BC)
+    add(g, "--mesh", d.mesh_kind, record=BC, dest="mesh_kind", choices=["quad", "tri"])
+    add(g, "--mesh-file", default_text="none (the generated mesh)")
     g = sub.add_argument_group("loading")
     if eps1_max:
-        g.add_argument("--eps1-max", type=R(0, 0.5), default=d.eps1_max, help="final axial strain (default %(default)s)")
-    g.add_argument("--d-eps1", type=R(0, 0.05), default=d.d_eps1, help="axial strain step (default %(default)s)")
-    g.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
-                   help="confining pressure = p0 [Pa] (default: p0 of --params FILE, or 200e3)")
+        add(g, "--eps1-max", d.eps1_max, record=BC)
+    add(g, "--d-eps1", d.d_eps1, record=BC,
+        note="" if eps1_max else "of the drained path to the start states")
+    add(g, "--sigma2", record="HParams", default_text="the p0 of --params FILE, else 200e3")
     opt.add_param_options(sub)
     g = sub.add_argument_group("imperfection")
-    g.add_argument("--imperfection", choices=["none", "spot", "band"], default="none")
-    g.add_argument("--imp-size", type=R(0, 1, hi_open=False), default=d.imp_size,
-                   help="fraction of the width, 0 < size <= 1 (spot radius, band half-width)")
-    g.add_argument("--imp-phi-g", type=_opt_float, default=d.imp_phi_g, help="weak phi_g [deg] or none")
-    g.add_argument("--imp-alpha0", type=_opt_float, default=d.imp_alpha0, help="weak alpha0 [deg] or none")
-    g.add_argument("--imp-angle", type=R(unit="deg"), default=d.imp_angle, help="band angle [deg]")
+    add(g, "--imperfection", "none", record=BC, choices=["none", "spot", "band"])
+    add(g, "--imp-size", d.imp_size, record=BC)
+    add(g, "--imp-phi-g", d.imp_phi_g, record=BC, parse=_opt_float)
+    add(g, "--imp-alpha0", d.imp_alpha0, record=BC, parse=_opt_float,
+        default_text="none (the specimen's)")
+    add(g, "--imp-angle", d.imp_angle, record=BC)
     g = sub.add_argument_group("solver and output")
-    g.add_argument("--rtol", type=R(0, 1), default=d.rtol)
-    g.add_argument("--max-iter", type=opt.integer(1), default=d.max_iter)
-    g.add_argument("--max-cutbacks", type=opt.integer(0), default=d.max_cutbacks)
+    add(g, "--rtol", d.rtol, record=BC)
+    add(g, "--max-iter", d.max_iter, record=BC)
+    add(g, "--max-cutbacks", d.max_cutbacks, record=BC)
     return g
+
+
+DESCRIPTION = """The plane-strain FE biaxial specimen (scikit-fem) with the H-model at every
+quadrature point. python -m fem COMMAND --help lists a command's options, each with its unit and
+default. --out is required: a folder that records the command that wrote it (command.json);
+another command refuses that folder unless --force."""
 
 
 def build_parser() -> argparse.ArgumentParser:
     d = BiaxialConfig()
-    ap = opt.Parser(prog="python -m fem", description=__doc__)
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    b = sub.add_parser("biaxial", help="plane-strain FE biaxial test with bifurcation checks")
-    b.add_argument("--out", required=True, help="output directory")
+    ap = opt.Parser(prog="python -m fem", description=DESCRIPTION)
+    sub = ap.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+    b = sub.add_parser("biaxial", help="plane-strain FE biaxial test with global and local "
+                       "bifurcation checks (det K, K_s, W2)")
+    opt.add_out(b)
     g = _specimen_options(b, d, eps1_max=True)
-    g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
-    g.add_argument("--n-sphere", type=opt.integer(1), default=d.n_sphere,
-                   help="strain directions sampled for the local min of W2 (default %(default)s)")
+    opt.add(g, "--no-fields", dest="fields", flag_value=False)
+    opt.add(g, "--n-sphere", d.n_sphere, record="BiaxialConfig")
     opt.add_quiet(g)
     _burst_parser(sub)
     return ap
@@ -88,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _burst_parser(sub):
     """``python -m fem burst``: the options of docs/burst.md beside the specimen's."""
     c = BurstConfig()
-    R = opt.real
+    add = opt.add
     b = sub.add_parser("burst", help="the burst of kinetic energy: proportional strain paths, "
                        "then the conjugate force held (docs/burst.md)",
                        description="From the drained FE path, the proportional strain path d eps2 "
@@ -96,31 +107,20 @@ def _burst_parser(sub):
                        "G_switch + dG just below and just past the c peak, in dynamics (Newmark "
                        "average acceleration); outcome by hmodel.burst_rule. See docs/burst.md "
                        "and docs/fem.md.")
-    b.add_argument("--out", required=True, help="output directory")
+    opt.add_out(b)
     g = b.add_argument_group("burst")
-    g.add_argument("--ratios", type=opt.reals(), default=list(c.ratios),
-                   help="R of the paths d eps2 = R d eps1, comma-separated, each finite and < 0 "
-                        f"(default {','.join(f'{r:g}' for r in c.ratios)})")
-    g.add_argument("--start-fractions", type=opt.reals(0, 1), default=list(c.start_fractions),
-                   help="start states at these fractions of the material point's drained peak "
-                        "eta, 0 < f < 1 (default "
-                        f"{','.join(f'{f:g}' for f in c.start_fractions)})")
-    g.add_argument("--dc", type=R(0, lo_open=False, unit="Pa"), default=None,
-                   help="held step of c [Pa] >= 0, dG = B dc (default 1e-4 x sigma2)")
-    g.add_argument("--density", type=R(0, unit="kg/m^3"), default=c.density,
-                   help="bulk density [kg/m^3] > 0 (default %(default)s)")
-    g.add_argument("--damping-ratio", type=R(0, 1, lo_open=False), default=c.damping_ratio,
-                   help="zeta of the mass-proportional damping at the lowest elastic mode, "
-                        "0 <= zeta < 1 (default %(default)s)")
-    g.add_argument("--steps-per-period", type=opt.integer(10), default=c.steps_per_period,
-                   help="time steps per lowest elastic period T1, >= 10 (default %(default)s)")
-    g.add_argument("--path-strain", type=R(0, 0.5), default=c.path_strain,
-                   help="largest axial strain of a path from its start (default %(default)s)")
-    g.add_argument("--path-d-eps1", type=R(0, 0.05), default=c.path_d_eps1,
-                   help="axial strain step of the proportional paths (default %(default)s; "
-                        "--d-eps1 is the drained path's)")
+    BC = "BurstConfig"
+    add(g, "--ratios", list(c.ratios), record=BC)
+    add(g, "--start-fractions", list(c.start_fractions), record=BC,
+        note="of the material point's drained peak eta, each < 1")
+    add(g, "--dc", record=BC, default_text="1e-4 sigma2")
+    add(g, "--density", c.density, record=BC, note="bulk, of the specimen")
+    add(g, "--damping-ratio", c.damping_ratio, record=BC)
+    add(g, "--steps-per-period", c.steps_per_period, record=BC)
+    add(g, "--path-strain", c.path_strain, record=BC)
+    add(g, "--path-d-eps1", c.path_d_eps1, record=BC)
     g = _specimen_options(b, c.specimen, eps1_max=False)
-    g.add_argument("--no-fields", dest="fields", action="store_false", help="skip fields.xdmf")
+    add(g, "--no-fields", dest="fields", flag_value=False)
     opt.add_quiet(g)
 
 
@@ -130,6 +130,10 @@ def check_config(cfg: BiaxialConfig) -> None:
     (missing, unreadable, no cells, bad elements) and the memory the run would need."""
     from .mesh import from_file
     from .problem import Imperfection
+    try:
+        cfg.validate()
+    except ValueError as e:
+        raise opt.record_error(e, "BiaxialConfig") from None
     try:
         base = cfg.params()
     except ParamError as e:
@@ -143,6 +147,8 @@ def check_config(cfg: BiaxialConfig) -> None:
         except ValueError as e:
             raise opt.OptionError(f"--imperfection {cfg.imperfection}: {e}") from None
     if cfg.mesh_file:
+        opt.check_file(cfg.mesh_file, "--mesh-file", "a triangle or quadrilateral mesh file "
+                       "meshio can read")
         try:
             mesh = from_file(cfg.mesh_file)
         except ValueError as e:

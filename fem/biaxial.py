@@ -7,6 +7,7 @@ newton.log (residual norms of every iterate), curve.png and summary.json (writte
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass, asdict, field, replace
@@ -78,6 +79,38 @@ class BiaxialConfig:
     n_sphere: int = 600
     mp_reference: bool = True
     global_process: bool = True
+
+    def validate(self) -> "BiaxialConfig":
+        """Every field of the specimen, loading and solver out of its range raises ValueError
+        "field = value is out of range: allowed ..." (``hmodel.options.record_error`` names the
+        option); the material is HParams's (``params()``), the weak zone Imperfection's."""
+        def real(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        def count(v, lo):
+            return isinstance(v, int) and not isinstance(v, bool) and v >= lo
+        checks = (("width", real(self.width) and self.width > 0, "value > 0 [m]"),
+                  ("height", real(self.height) and self.height > 0, "value > 0 [m]"),
+                  ("nx", count(self.nx, 1), "an integer value >= 1"),
+                  ("ny", count(self.ny, 1), "an integer value >= 1"),
+                  ("mesh_kind", self.mesh_kind in ("quad", "tri"), "quad or tri"),
+                  ("eps1_max", real(self.eps1_max) and 0 < self.eps1_max < 0.5,
+                   "0 < value < 0.5"),
+                  ("d_eps1", real(self.d_eps1) and 0 < self.d_eps1 < 0.05, "0 < value < 0.05"),
+                  ("imperfection", self.imperfection in (None, "none", "spot", "band"),
+                   "none, spot or band"),
+                  ("imp_size", real(self.imp_size) and 0 < self.imp_size <= 1,
+                   "0 < value <= 1 (a fraction of the width)"),
+                  ("imp_angle", real(self.imp_angle), "a finite value [deg]"),
+                  ("rtol", real(self.rtol) and 0 < self.rtol < 1, "0 < value < 1"),
+                  ("max_iter", count(self.max_iter, 1), "an integer value >= 1"),
+                  ("max_cutbacks", count(self.max_cutbacks, 0), "an integer value >= 0"),
+                  ("n_sphere", count(self.n_sphere, 1), "an integer value >= 1"))
+        for name, ok, allowed in checks:
+            if not ok:
+                raise ValueError(f"{name} = {getattr(self, name)!r} is out of range: allowed "
+                                 f"{allowed}")
+        return self
 
     def params(self) -> HParams:
         """The material's HParams (p0 = sigma2)."""
@@ -304,8 +337,8 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
                                  rf"{row['step']}, $\varepsilon_1$ = {100 * row['eps1']:.3f} %"))
         return (f"step {row['step']:4d} eps1 = {100 * row['eps1']:7.4f} % q = {row['q'] / 1e3:9.3f} kPa "
                 f"eta = {row['eta']:.4f} it = {row['newton_iters']} cut = {row['cutbacks']} "
-                f"detK = {row['det_k_sign']:+d}/{row['det_k_sign_f']:+d} "
-                f"lam(Ks) = {row['lam_min_ks']:.3e}/{row['lam_min_ks_f']:.3e} "
+                f"sign det K (platen displ./force) = {row['det_k_sign']:+d}/{row['det_k_sign_f']:+d} "
+                f"lam_min(K_s) (displ./force) = {row['lam_min_ks']:.3e}/{row['lam_min_ks_f']:.3e} Pa "
                 f"W2 = {row['w2_global']:+.3f} slide = {row['sliding_fraction']:.3f} "
                 f"t = {row['time_s']:.1f} s")
 

@@ -516,12 +516,14 @@ class BurstResult(NamedTuple):
 
 def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Specimen = Specimen(),
               dynamics: Dynamics = Dynamics(), d_eps1: float = 1e-5, path_strain: float = 0.03,
-              progress=None) -> BurstResult:
+              progress=None, path_d_eps1: float | None = None) -> BurstResult:
     """The whole material-point experiment of docs/burst.md at params.p0: for each start fraction
     and each R, the proportional path, its c peak, the ``below`` and ``past`` switches (each
-    checked statically and held dynamically at c_switch + dc). ``progress``: None or a callable
-    taking one line of text."""
+    checked statically and held dynamically at c_switch + dc). ``d_eps1``: the axial strain step
+    of the drained path, ``path_d_eps1`` the proportional paths' (None: ``d_eps1``).
+    ``progress``: None or a callable taking one line of text."""
     t0 = time.perf_counter()
+    pd_eps1 = d_eps1 if path_d_eps1 is None else path_d_eps1
     for R in ratios:
         check_ratio(R, None)
     fr = [float(f) for f in start_fractions]
@@ -537,7 +539,7 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
         r0, s0 = state_at_eta(params, f * eta_peak, params.p0, d_eps1)
         eta0 = float(r0.invariants()[2][-1])
         for R in ratios:
-            p, pk = proportional_path(s0, params, R, d_eps1, path_strain)
+            p, pk = proportional_path(s0, params, R, pd_eps1, path_strain)
             c = conjugate_stress(p.sigma, R)
             k_peak, k_below = pk.peak, pk.below()
             info = PathInfo(float(R), f, eta0, float(r0.eps[-1, 0]), p, c, k_peak, k_below, s0)
@@ -549,7 +551,7 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
             for switch, k in (("below", k_below), ("past", k_peak)):
                 if k is None:
                     continue
-                st = s0 if k == 0 else run_path(s0, params, proportional_strain(d_eps1, R), k).state
+                st = s0 if k == 0 else run_path(s0, params, proportional_strain(pd_eps1, R), k).state
                 c_sw = float(c[k])
                 dc_run = pk.dc_below(k, dc)
                 stat = static_check(st, params, R, c_sw + dc_run)

@@ -47,9 +47,10 @@ def _check_path(args, eps1_max, options="--d-eps1"):
 
 
 def _check_probes(args, P):
-    n = 2 * args.n     # the refinement typically doubles the uniform grid near the peak
-    opt.check_memory(n * P.n_dir * PROBE_BYTES_PER_DIR, f"{args.n} strain probes of {P.n_dir} "
-                     "orientations", "--n / --n-dir", "fewer directions or orientations")
+    n = 2 * args.n_probes     # the refinement typically doubles the uniform grid near the peak
+    opt.check_memory(n * P.n_dir * PROBE_BYTES_PER_DIR, f"{args.n_probes} strain probes of "
+                     f"{P.n_dir} orientations", "--n-probes / --n-dir",
+                     "fewer directions or orientations")
 
 
 def _start(args, stage, text):
@@ -72,9 +73,6 @@ def cmd_biaxial(args, stage):
     P = params_from(args)
     sigma2 = P.p0
     _check_path(args, args.eps1_max, "--eps1-max / --d-eps1")
-    if args.eps1_max >= 1.0:
-        raise opt.OptionError(f"--eps1-max {args.eps1_max:g} is out of range: allowed 0 < value < 1 "
-                              "(the volume V0 det(I - eps) vanishes at eps1 = 1)")
     t0 = _start(args, stage, f"drained biaxial test, sigma2 = {sigma2:g} Pa, to eps1 = {args.eps1_max:g}")
     note = f"python -m hmodel biaxial; {args.params_note}"
     try:
@@ -133,13 +131,13 @@ def cmd_probes(args, stage):
     P = params_from(args)
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
-    t0 = _start(args, stage, f"drained path to point A (eta = {args.eta:g}), sigma2 = {P.p0:g} Pa")
-    r, sA = state_at_eta(P, args.eta, P.p0, args.d_eps1)
-    _say(stage, f"strain probes at A: {args.n} directions, refined where the response jumps")
-    sw = directional_sweep(sA, P, n=args.n, norm=args.norm)
+    t0 = _start(args, stage, f"drained path to point A (eta = {args.eta_a:g}), sigma2 = {P.p0:g} Pa")
+    r, sA = state_at_eta(P, args.eta_a, P.p0, args.d_eps1)
+    _say(stage, f"strain probes at A: {args.n_probes} directions, refined where the response jumps")
+    sw = directional_sweep(sA, P, n=args.n_probes, norm=args.strain_norm)
     _say(stage, f"stress probes every {args.stress_step:g} deg ({len(sw.alpha_eps)} strain probes done)")
     targets = np.arange(0.0, 360.0, args.stress_step)
-    sp = stress_probes(sA, P, targets, sigma_norm=args.sigma_norm, sweep=sw)
+    sp = stress_probes(sA, P, targets, sigma_norm=args.stress_norm, sweep=sw)
     tc = tangent_criteria(sA, P)
     t_run = time.time() - t0
     _say(stage, "writing probes.csv, stress_probes.csv, Figs. 3, 6-9, 11 and summary.json")
@@ -155,7 +153,7 @@ def cmd_probes(args, stage):
     plots.fig_stress_components(sw, 0, pth("fig6_axial_components.png"))
     plots.fig_stress_components(sw, 1, pth("fig7_lateral_components.png"))
     plots.fig_polar_w2([("H-model W2", sw.alpha_sigma, sw.w2, "C0-")], pth("fig8_polar_w2.png"),
-                       title=f"Normalized second-order work at A ($\\eta$ = {args.eta}) (Fig. 8)",
+                       title=f"Normalized second-order work at A ($\\eta$ = {args.eta_a}) (Fig. 8)",
                        cone=arcs(sw.alpha_sigma, sw.w2 <= 0), plastic=arcs(sw.alpha_sigma, sw.plastic),
                        no_solution=targets[sp.n_solutions == 0])
     plots.fig_w2_split(sw, pth("fig9_w2_split.png"))
@@ -199,21 +197,27 @@ def cmd_burst(args, stage):
     if args.dc is None:
         args.dc = 1e-4 * args.sigma2
     try:
-        for R in args.ratios:
-            burst.check_ratio(R)
         spec = burst.Specimen(args.width, args.height, args.density).validate()
+    except ValueError as e:
+        raise opt.record_error(e, "Specimen") from None
+    try:
         dyn = burst.Dynamics(args.damping_ratio, args.steps_per_period).validate()
     except ValueError as e:
-        raise opt.OptionError(str(e)) from None
-    if args.d_eps1 > args.path_strain:
-        raise opt.OptionError(f"--d-eps1 {args.d_eps1:g} is out of range: allowed 0 < value <= "
-                              f"--path-strain {args.path_strain:g}")
+        raise opt.record_error(e, "Dynamics") from None
+    bad = [f for f in args.start_fractions if f >= 1]
+    if bad:
+        raise opt.OptionError(f"--start-fractions {bad[0]:g} is out of range: allowed 0 < value < "
+                              "1 (a state below the drained peak)")
+    if args.path_d_eps1 > args.path_strain:
+        raise opt.OptionError(f"--path-d-eps1 {args.path_d_eps1:g} is out of range: allowed 0 < "
+                              f"value <= --path-strain {args.path_strain:g}")
     _check_path(args, DOMAIN_EPS1_MAX)
     t0 = _start(args, stage, f"burst: R = {', '.join(f'{R:g}' for R in args.ratios)}, start at "
                 f"{', '.join(f'{f:g}' for f in args.start_fractions)} of the drained peak eta, "
                 f"sigma2 = {args.sigma2:g} Pa, dc = {args.dc:g} Pa")
     res = burst.run_burst(P, args.ratios, args.start_fractions, args.dc, spec, dyn, args.d_eps1,
-                          args.path_strain, progress=lambda m: _say(stage, m))
+                          args.path_strain, progress=lambda m: _say(stage, m),
+                          path_d_eps1=args.path_d_eps1)
     cone = {}
     if not args.no_cone:
         _say(stage, "directional analysis: where each path direction enters the cone W2 <= 0, "
@@ -316,122 +320,107 @@ def cmd_burst(args, stage):
           f"({t_run:.1f} s)")
 
 
+DESCRIPTION = """The H-microdirectional model as a material point (Nicot, Hadda & Darve 2013).
+python -m hmodel COMMAND --help lists a command's options, each with its unit and default.
+--out is required: a folder (the parameter file for params) that records the command that wrote
+it (command.json); another command refuses that folder unless --force."""
+
+
 def build_parser() -> argparse.ArgumentParser:
-    R = opt.real
-    ap = opt.Parser(prog="python -m hmodel",
-                                 description="H-microdirectional model: biaxial test, directional "
-                                             "analysis of second-order work, bifurcation domain")
-    sub = ap.add_subparsers(dest="command", required=True)
+    add = opt.add
+    ap = opt.Parser(prog="python -m hmodel", description=DESCRIPTION,
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    p0 = "the p0 of --params FILE, else Table I's 200e3"
 
     b = sub.add_parser("biaxial", help="drained biaxial test (Figs. 4-5)")
-    b.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
-                   help="confining stress [Pa] (default: p0 of --params FILE, or 200e3)")
-    b.add_argument("--eps1-max", type=R(0), default=0.05, help="final axial strain [-], < 1")
-    b.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step [-]")
-    b.add_argument("--eta-a", type=R(0, 2), default=1.029, help="stress ratio of point A (marked)")
-    b.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_out(b)
+    add(b, "--sigma2", record="HParams", default_text=p0)
+    add(b, "--eps1-max", 0.05)
+    add(b, "--d-eps1", 1e-5)
+    add(b, "--eta-a", 1.029, note="marked on the curves")
     opt.add_quiet(b)
     add_param_options(b)
     b.set_defaults(func=cmd_biaxial)
 
     p = sub.add_parser("probes", help="directional analysis at point A (Figs. 3, 6-9, 11)")
-    p.add_argument("--eta", type=R(0, 2), default=1.029,
-                   help="stress ratio q/p of point A (0 < eta < 2: q/p < 2 while sigma2 > 0)")
-    p.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
-                   help="confining stress [Pa] (default: p0 of --params FILE, or 200e3)")
-    p.add_argument("--n", type=opt.integer(8), default=360, help="uniform strain directions before refinement")
-    p.add_argument("--norm", type=R(0, 1e-2, hi_open=False), default=1e-6,
-                   help="strain probe norm |d eps| [-] (a rate probe: small)")
-    p.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the path [-]")
-    p.add_argument("--stress-step", type=R(0, 360, hi_open=False, unit="deg"), default=5.0,
-                   help="stress-probe spacing [deg]")
-    p.add_argument("--sigma-norm", type=R(0, unit="Pa"), default=2.5e3, help="stress probe norm [Pa]")
-    p.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_out(p)
+    add(p, "--eta-a", 1.029, note="the state of the probes (q/p < 2 while sigma2 > 0)")
+    add(p, "--sigma2", record="HParams", default_text=p0)
+    add(p, "--n-probes", 360, note="refined where the response jumps")
+    add(p, "--strain-norm", 1e-6)
+    add(p, "--d-eps1", 1e-5, note="to point A")
+    add(p, "--stress-step", 5.0)
+    add(p, "--stress-norm", 2.5e3)
     opt.add_quiet(p)
     add_param_options(p)
     p.set_defaults(func=cmd_probes)
 
-    d = sub.add_parser("domain", help="bifurcation domain over confining pressures (Fig. 10)")
-    d.add_argument("--sigma2", type=opt.reals(0, unit="Pa"), default=None,
-                   help="comma-separated confining stresses [Pa] (default: p0/2, p0, 2 p0 with p0 "
-                        "of --params FILE: 100e3,200e3,400e3 for Table I)")
-    d.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step [-]")
-    d.add_argument("--n", type=opt.integer(8), default=180, help="strain directions of each check")
-    d.add_argument("--workers", type=opt.integer(1), default=None,
-                   help="parallel processes, >= 1 (default: min(pressures, cores))")
-    d.add_argument("--out", default="out/hmodel", help="output folder")
+    d = sub.add_parser("domain", help="bifurcation domain over confining stresses (Fig. 10)")
+    opt.add_out(d)
+    add(d, "--sigma2", many=True, note="comma-separated, one drained path each",
+        default_text="p0/2, p0, 2 p0 with the p0 of --params FILE: 100e3,200e3,400e3 for Table I")
+    add(d, "--d-eps1", 1e-5)
+    add(d, "--n-probes", 180, note="of each check")
+    add(d, "--workers", default_text="min(pressures, cores)")
     opt.add_quiet(d)
     add_param_options(d)
     d.set_defaults(func=cmd_domain)
 
     u = sub.add_parser("burst", help="proportional strain paths, c controlled past its peak: the "
                                      "burst of kinetic energy (docs/burst.md)")
-    u.add_argument("--ratios", type=opt.reals(unit="-"), default=[-1.0, -1.5, -2.0, -3.0],
-                   help="comma-separated R of the paths d eps2 = R d eps1, each finite and < 0 "
-                        "(default %(default)s)")
-    u.add_argument("--start-fractions", type=opt.reals(0, 1), default=[0.90, 0.95],
-                   help="start states at these fractions of the drained peak eta, 0 < f < 1 "
-                        "(default %(default)s)")
-    u.add_argument("--dc", type=R(0, lo_open=False, unit="Pa"), default=None,
-                   help="step of c = s1 + R s2 held after the switch [Pa] (dG = B dc per unit "
-                        "thickness), >= 0 (default 1e-4 sigma2, as fem burst)")
-    u.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
-                   help="confining stress [Pa] (default: the p0 of --params, or 200e3)")
-    u.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the paths [-]")
-    u.add_argument("--path-strain", type=R(0, 0.2, hi_open=False), default=0.03,
-                   help="axial strain of each proportional path from its start [-]")
-    u.add_argument("--density", type=R(0, unit="kg/m^3"), default=1600.0,
-                   help="bulk density of the specimen [kg/m^3] (dry granular: 1500-1700)")
-    u.add_argument("--width", type=R(0, unit="m"), default=0.05, help="specimen width B [m]")
-    u.add_argument("--height", type=R(0, unit="m"), default=0.1, help="specimen height H [m]")
-    u.add_argument("--damping-ratio", type=R(0, 1, lo_open=False), default=0.05,
-                   help="mass-proportional damping ratio of the lowest elastic mode, 0 <= zeta < 1")
-    u.add_argument("--steps-per-period", type=R(10, lo_open=False), default=20.0,
-                   help="time steps in the lowest elastic period T1, >= 10")
-    u.add_argument("--no-cone", action="store_true",
-                   help="skip the directional analysis (where each path's strain direction enters "
-                        "the cone W2 <= 0; the first W2 = 0 of the drained path)")
-    u.add_argument("--out", default="out/hmodel", help="output folder")
+    opt.add_out(u)
+    add(u, "--ratios", [-1.0, -1.5, -2.0, -3.0], parse=_arg(_check_ratios))
+    add(u, "--start-fractions", [0.90, 0.95], note="f < 1 here (a state below the drained peak)")
+    add(u, "--dc", default_text="1e-4 sigma2, as fem burst")
+    add(u, "--sigma2", record="HParams", default_text=p0)
+    add(u, "--d-eps1", 1e-5, note="to the start states")
+    add(u, "--path-d-eps1", 1e-5)
+    add(u, "--path-strain", 0.03)
+    add(u, "--density", 1600.0, record="Specimen",
+        note="bulk, of the homogeneous specimen (dry granular: 1500-1700)")
+    add(u, "--width", 0.05, record="Specimen")
+    add(u, "--height", 0.1, record="Specimen")
+    add(u, "--damping-ratio", 0.05, record="Dynamics")
+    add(u, "--steps-per-period", 20, record="Dynamics")
+    add(u, "--no-cone")
     opt.add_quiet(u)
     add_param_options(u)
     u.set_defaults(func=cmd_burst)
 
     f = sub.add_parser("fit", help="fit the H-model to a measured drained biaxial curve (docs/fit.md)")
-    f.add_argument("--data", required=True,
-                   help="CSV with columns eps1, q [Pa] (and eps_v or eps2, s2 [Pa] where present), "
-                        "compression positive")
-    f.add_argument("--free", type=_arg(hfit.parse_free), default=hfit.DEFAULT_FREE,
-                   help=f"comma-separated free parameters, of {', '.join(hfit.FREE_CHOICES)} "
-                        f"(default {','.join(hfit.DEFAULT_FREE)}); the others as given")
-    f.add_argument("--bounds", type=_arg(hfit.parse_bounds), default={},
-                   help="NAME=LOWER:UPPER,... (SI, degrees; default x/100 to x*100 of the start for "
-                        "kn, kt, r_g, p0; phi_g 2:60; alpha0 31:70)")
-    f.add_argument("--starts", type=opt.integer(1), default=8,
-                   help="starts: the given values, then a seeded Latin hypercube in the bounds")
-    f.add_argument("--seed", type=opt.integer(0), default=0, help="seed of the starts")
-    f.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
-                   help="confining stress [Pa] (default: the median of the data's column s2 or sigma2)")
-    f.add_argument("--w-epsv", type=R(0, lo_open=False), default=1.0,
-                   help="weight of eps_v against q, each scaled by its largest |value| (0: q only)")
-    f.add_argument("--d-eps1", type=R(0), default=1e-5, help="axial strain step of the final fit [-]")
-    f.add_argument("--d-eps1-search", type=R(0), default=1e-4,
-                   help="axial strain step during the search from every start [-]")
-    f.add_argument("--max-nfev", type=opt.integer(1), default=100,
-                   help="residual evaluations per start (each Jacobian costs 2 more model paths "
-                        "per free parameter)")
-    f.add_argument("--out", default="out/fit", help="output folder")
+    opt.add_out(f)
+    add(f, "--data", required=True, metavar="CSV")
+    add(f, "--free", hfit.DEFAULT_FREE, parse=_arg(hfit.parse_free),
+        note=f"of {', '.join(hfit.FREE_CHOICES)}; the others as given")
+    add(f, "--bounds", {}, parse=_arg(hfit.parse_bounds),
+        default_text="x/100 to x*100 of the start for kn, kt, r_g, p0; phi_g 2:60; alpha0 31:70")
+    add(f, "--starts", 8)
+    add(f, "--seed", 0, note="of the starts")
+    add(f, "--sigma2", note="the data's", default_text="the median of the data's column s2 or "
+        "sigma2")
+    add(f, "--w-epsv", 1.0)
+    add(f, "--d-eps1", 1e-5, note="of the final fit")
+    add(f, "--d-eps1-search", 1e-4)
+    add(f, "--max-nfev", 100)
     opt.add_quiet(f)
     add_param_options(f)
     f.set_defaults(func=cmd_fit)
 
     w = sub.add_parser("params", help="write a parameter file: Table I, or --params FILE, with "
                                       "the options given on top (docs/parameters.md)")
-    w.add_argument("--out", required=True, help="the JSON file to write")
-    w.add_argument("--sigma2", type=R(0, unit="Pa"), default=None,
-                   help="p0: the confining stress of the initial state [Pa]")
+    opt.add_out(w, "file")
+    add(w, "--sigma2", record="HParams", note="the file's p0", default_text=p0)
     add_param_options(w)
     w.set_defaults(func=cmd_params)
     return ap
+
+
+def _check_ratios(text):
+    """--ratios: comma-separated R, each finite and < 0 (``burst.check_ratio`` says why not)."""
+    from .burst import check_ratio
+    vals = opt.reals()(text)
+    return [check_ratio(v, None) for v in vals]
 
 
 def _arg(parse):
@@ -480,7 +469,7 @@ def cmd_domain(args, stage):
 
     try:
         pts = bifurcation_domain(P, pressures, workers=args.workers, d_eps1=args.d_eps1,
-                                 n_dir_probe=args.n, progress=lambda m: _say(stage, m))
+                                 n_dir_probe=args.n_probes, progress=lambda m: _say(stage, m))
     except BaseException as e:
         if getattr(e, "partial", None):     # interrupted: the pressures finished stay
             write_rows(e.partial)
@@ -504,6 +493,9 @@ def cmd_domain(args, stage):
 
 def cmd_fit(args, stage):
     """Exit 0 fitted, 1 not fittable (summary.json and fig_fit.png say why), 2 bad option."""
+    opt.check_csv(args.data, ("eps1", "q"), "--data",
+                  "a CSV file with a header row naming eps1 and q (and eps_v or eps2, s2 or "
+                  "sigma2 where present): a drained curve, e.g. the biaxial.csv of a biaxial test")
     try:
         curve = hfit.read_curve(args.data, sigma2=args.sigma2)
     except hfit.CurveError as e:

@@ -497,24 +497,45 @@ def _run_path_steps(state, params, control, n_steps, until, progress, label, cut
 
 
 class _Progress:
-    """A one-line progress bar on stderr (no dependency)."""
+    """Progress on stderr (no dependency): a one-line bar redrawn in place (``\\r``) on a
+    terminal; elsewhere (a log file, a pipe) plain lines, one at each tenth of the path
+    (``PLAIN_PARTS``) and at most one every ``PLAIN_MIN_S`` seconds, so that a log reads."""
 
-    def __init__(self, total, label):
+    PLAIN_PARTS = 10        # a plain line at each tenth of the path
+    PLAIN_MIN_S = 2.0       # and at most one every 2 s (the last one always)
+
+    def __init__(self, total, label, stream=None):
         self.total, self.label, self.t0, self.last = total, label, time.time(), -1.0
+        self.stream = sys.stderr if stream is None else stream
+        try:
+            self.tty = self.stream.isatty()
+        except (AttributeError, ValueError):
+            self.tty = False
+        self.part = 0
 
     def update(self, k):
         now = time.time()
-        if now - self.last < 0.2 and k < self.total:
-            return
-        self.last = now
         f = k / self.total
-        bar = "#" * int(30 * f)
-        sys.stderr.write(f"\r{self.label}: [{bar:<30s}] {k}/{self.total} {now - self.t0:6.1f} s")
-        sys.stderr.flush()
+        if self.tty:
+            if now - self.last < 0.2 and k < self.total:
+                return
+            self.last = now
+            bar = "#" * int(30 * f)
+            self.stream.write(f"\r{self.label}: [{bar:<30s}] {k}/{self.total} {now - self.t0:6.1f} s")
+        else:
+            if k < self.total and (k * self.PLAIN_PARTS < (self.part + 1) * self.total
+                                   or now - self.last < self.PLAIN_MIN_S):
+                return
+            self.last = now
+            self.part = k * self.PLAIN_PARTS // self.total
+            self.stream.write(f"{self.label}: {k}/{self.total} steps ({100 * f:.0f} %), "
+                              f"{now - self.t0:.1f} s\n")
+        self.stream.flush()
 
     def close(self):
-        sys.stderr.write("\n")
-        sys.stderr.flush()
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
 
 
 # -- standard paths ----------------------------------------------------------------------------

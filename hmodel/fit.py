@@ -88,7 +88,8 @@ def read_curve(path, sigma2: float | None = None) -> Curve:
     except OSError as e:
         raise CurveError(f"cannot read it ({e.strerror or e})") from None
     except (ValueError, TypeError) as e:
-        raise CurveError(f"not a CSV of numbers with a header row ({e})") from None
+        first = (str(e).strip().splitlines() or [""])[0].rstrip(" !:")
+        raise CurveError(f"not a CSV of numbers with a header row ({first})") from None
     names = list(cols)
     if "eps1" not in cols or "q" not in cols:
         raise CurveError(f"columns {names}: allowed a CSV with columns eps1 and q (and eps_v or "

@@ -1,7 +1,21 @@
-"""What the hmodel and fem command lines share: one-line errors, checked option types, output
-folders and memory checked before any computation, Ctrl-C / SIGTERM as one line, and the model
-parameters of a command (``add_param_options``, ``params_from``, ``record_params``: --params FILE
-with the options on top, docs/parameters.md).
+"""What the hmodel, fem and dem command lines share: one vocabulary of options, one-line errors,
+checked option types, output folders and memory checked before any computation, Ctrl-C /
+SIGTERM as one line, and the model parameters of a command (``add_param_options``,
+``params_from``, ``record_params``: --params FILE with the options on top, docs/parameters.md).
+
+The vocabulary (``VOCABULARY``, issue 32) is written once: every option of the three parts, by
+name, with the quantity it is (in the paper's symbols), its unit, its kind and the range the
+parser checks, the record fields that check it where a command binds it to its record
+(``HParams``, ``DemParams``, ``BurstOptions``, ``ProbeOptions``, ``BiaxialConfig``,
+``BurstConfig``, ``Specimen``, ``Dynamics``: their validation gives the range, once; the
+command names the option with ``record_error``), and its former names (refused with "did you
+mean" the new one). The parsers are built from it (``add``), so that every help says what the
+value is, its unit and its default.
+
+The rule of --out: required by every command that writes (a folder; the file of ``params``):
+a newcomer sees where a run goes, and no two commands share a default folder. The folder
+records the command that wrote it (command.json, ``mark_owner``); another command refuses it
+before writing anything (``check_owner``, exit 2) unless --force.
 
 The rule (both CLIs): every option is validated before anything is computed or written; a bad
 one gives one line ``error: ...`` naming the option and its allowed range on stderr and exit
@@ -12,6 +26,7 @@ file is written atomically or row by row).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import re
@@ -22,6 +37,8 @@ import threading
 from contextlib import contextmanager
 
 __all__ = ["OptionError", "Parser", "real", "integer", "reals", "add_quiet", "check_out_dir", "check_out_file",
+           "Term", "VOCABULARY", "add", "add_out", "option_of", "record_error", "renamed_to",
+           "check_owner", "mark_owner", "folder_owner", "check_file", "check_folder", "check_csv",
            "check_memory", "param_option_error", "add_param_options", "params_from", "record_params",
            "Stage", "run_cli", "COMPILE_NOTICE", "announce_compilation", "listen_for_compilation"]
 
@@ -48,7 +65,7 @@ class Parser(argparse.ArgumentParser):
         self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)[\w.,+-]*$", re.IGNORECASE)
 
     def error(self, message):
-        raise OptionError(f"{message} (see {self.prog} --help)")
+        raise OptionError(f"{_reword(message, self)} (see {self.prog} --help)")
 
     def parse_known_args(self, args=None, namespace=None):
         """argparse's, but anything left over is an error here, in the (sub)parser that got it
@@ -71,19 +88,46 @@ class Parser(argparse.ArgumentParser):
             if chosen is not None and option in chosen._option_string_actions:
                 return (f"{option} is an option of the subcommand: write it after "
                         f"'{chosen.prog.split()[-1]}'")
-        return f"no option {option}" + _resembles(option, self._option_string_actions)
+        return f"no option {option}" + _resembles(option, self._option_string_actions,
+                                                  renamed_to(option, self.prog))
 
 
-def _resembles(option, options) -> str:
+def _resembles(option, options, renamed=()) -> str:
     """' (options are written in full): did you mean --sigma2?' for ``option``: the ``options``
-    it abbreviates (what argparse's prefix matching would have taken), else close spellings."""
+    it abbreviates (what argparse's prefix matching would have taken), else close spellings;
+    ' (renamed --sigma2): did you mean --sigma2?' for a former name (``renamed``: its new names
+    in this command, first)."""
     import difflib
     longs = sorted(o for o in options if o.startswith("--"))
-    like = ([o for o in longs if o.startswith(option)]
-            or difflib.get_close_matches(option, longs, n=3, cutoff=0.75))
+    like = [o for o in longs if o.startswith(option)]
+    if not like and not renamed:
+        like = difflib.get_close_matches(option, longs, n=3, cutoff=0.75)
+    like = list(renamed) + [o for o in like if o not in renamed]
     if not like:
         return ""
-    return f" (options are written in full): did you mean {' or '.join(like)}?"
+    why = f"renamed {' / '.join(renamed)}" if renamed else "options are written in full"
+    return f" ({why}): did you mean {' or '.join(like)}?"
+
+
+def _reword(message, parser) -> str:
+    """argparse's message, reworded where it is unclear to a newcomer: an unknown subcommand or
+    choice gets "did you mean" (``dem brust``: burst), a missing subcommand lists them."""
+    import difflib
+    m = re.match(r"argument (\S+): invalid choice: '?([^' ]*)'? \(choose from (.*)\)$", message)
+    if m:
+        what, word = m.group(1), m.group(2)
+        choices = (re.findall(r"'([^']*)'", m.group(3))
+                   or [c.strip() for c in m.group(3).split(",")])
+        like = difflib.get_close_matches(word, choices, n=2, cutoff=0.6)
+        guess = f"did you mean {' or '.join(like)}? " if like else ""
+        if what.startswith("-"):
+            return f"{what} {word!r}: {guess}allowed one of {', '.join(choices)}"
+        return f"no command {word!r}: {guess}allowed one of {', '.join(choices)}"
+    for sub in (a for a in parser._actions if isinstance(a, argparse._SubParsersAction)):
+        if message in (f"the following arguments are required: {sub.dest}",
+                       f"the following arguments are required: {sub.metavar}"):
+            return f"a command is required: one of {', '.join(sub.choices)}"
+    return message
 
 
 def _interval(lo, hi, lo_open, hi_open):
@@ -153,8 +197,381 @@ def reals(lo=None, hi=None, *, lo_open=True, hi_open=True, unit=""):
 def add_quiet(ap: argparse.ArgumentParser):
     """--quiet, the same on every command that shows progress: no progress lines on stderr
     (results, warnings and errors are still printed)."""
-    ap.add_argument("--quiet", action="store_true",
-                    help="no progress lines on stderr (results, warnings and errors still shown)")
+    add(ap, "--quiet")
+
+
+# -- the vocabulary: one name per quantity, in the paper's symbols, for the three command lines --
+@dataclasses.dataclass(frozen=True)
+class Term:
+    """One option of the vocabulary: ``name`` ("--sigma2"), ``help`` (what the value is: the
+    quantity, in the paper's symbols), ``unit`` (SI; "-" dimensionless or a count; None: not a
+    quantity, e.g. a file, a folder, a switch, a choice, a seed), ``kind`` ("real", "reals"
+    (comma-separated), "int", "flag" (a switch, off unless given), "bool" (--x / --no-x),
+    "path", "text", "choice"), the range (lo, hi, lo_open, hi_open; None: no bound) the parser
+    checks where no record does, ``fields`` (the record fields that check it where a command
+    binds the option to its record: "HParams.p0") and ``old`` (former names: (name, commands),
+    commands as "dem biaxial", () for every command that has this option)."""
+
+    name: str
+    help: str
+    unit: str | None = None
+    kind: str = "real"
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = True
+    hi_open: bool = True
+    fields: tuple = ()
+    old: tuple = ()
+
+    @property
+    def bounded(self) -> bool:
+        return self.lo is not None or self.hi is not None
+
+    def range_text(self) -> str:
+        return _interval(self.lo, self.hi, self.lo_open, self.hi_open)
+
+
+_T = Term
+# Every option of python -m hmodel, fem and dem, once (the parsers are built from it: ``add``).
+VOCABULARY = {t.name: t for t in (
+    # -- where a command reads and writes, how it runs ----------------------------------------
+    _T("--out", "where the command writes", None, "path"),
+    _T("--force", "write into a folder another command wrote (its files of the same names are "
+       "replaced)", None, "flag"),
+    _T("--params", "parameter file (JSON; docs/parameters.md)", None, "path"),
+    _T("--quiet", "no progress lines on stderr (results, warnings and errors still shown)", None,
+       "flag"),
+    _T("--resume", "keep the work already in --out and do the rest", None, "flag"),
+    _T("--workers", "local worker processes", "-", "int", 1, 1024, False, False),
+    _T("--threads", "threads of a run (results do not depend on it)", "-", "int", 1, None,
+       False, fields=("threads.check_threads",)),
+    _T("--scheduler", "dask.distributed scheduler address (host:port): the runs go to its "
+       "workers", None, "text"),
+    _T("--state", "DEM state file: an .npz written by python -m dem biaxial (stateA.npz, "
+       "states/state_f*.npz)", None, "path"),
+    _T("--biaxial", "output folder of python -m dem biaxial (its states/)", None, "path"),
+    _T("--states", "comma-separated states of --biaxial (file names or targets of "
+       "states/states.csv, e.g. f=0.9,f=0.95)", None, "text"),
+    _T("--data", "CSV with a header row: columns eps1 [-] and q [Pa] (and eps_v or eps2 [-], s2 "
+       "or sigma2 [Pa] where present), compression positive", None, "path"),
+    _T("--mesh-file", "meshio-readable triangle or quad mesh (overrides --nx, --ny, --mesh)",
+       None, "path"),
+    _T("--cache", "folder of the cached dense samples", None, "path"),
+    _T("--dem-params", "DemParams file of the DEM sample (python -m dem params)", None, "path"),
+    _T("--hmodel-params", "HParams file of the H-model and FE parts (python -m hmodel params)",
+       None, "path"),
+    # -- the H-model's parameters (Table I): checked by HParams ----------------------------------
+    _T("--kn", "normal contact stiffness kn", "N/m", fields=("HParams.kn",)),
+    _T("--kt", "tangential contact stiffness kt", "N/m", fields=("HParams.kt",)),
+    _T("--phi-g", "grain (contact) friction angle phi_g, mu = tan(phi_g)", "deg",
+       fields=("HParams.phi_g", "DemParams.phi_g"), old=(("--friction", ()),)),
+    _T("--r-g", "grain radius r_g", "m", fields=("HParams.r_g",)),
+    _T("--alpha0", "initial opening angle alpha0 of the hexagons", "deg",
+       fields=("HParams.alpha0",)),
+    _T("--n-dir", "number of hexagon orientations", "-", "int", fields=("HParams.n_dir",)),
+    _T("--thickness", "out-of-plane thickness h of the slab (file: null for 2 r_g)", "m",
+       fields=("HParams.thickness",)),
+    _T("--fabric-a", "fabric anisotropy a of omega(theta) = (1 + a cos 2(theta - b)) / n_dir",
+       "-", fields=("HParams.fabric_a",)),
+    _T("--fabric-b", "fabric direction b", "deg", fields=("HParams.fabric_b",)),
+    # -- the DEM's parameters (the paper's set): checked by DemParams ----------------------------
+    _T("--n", "number of disks", "-", "int", 1, 10_000_000, False, False,
+       fields=("DemParams.n",)),
+    _T("--seed", "seed of the random generator", None, "int", 0, None, False,
+       fields=("DemParams.seed",)),
+    _T("--r-min", "smallest disk radius", "m", fields=("DemParams.r_min",)),
+    _T("--r-max", "largest disk radius", "m", fields=("DemParams.r_max",)),
+    _T("--density", "mass density", "kg/m^3",
+       fields=("DemParams.density", "Specimen.density", "BurstConfig.density")),
+    _T("--kn-over-d", "normal contact stiffness over the mean diameter, kn/D", "Pa",
+       fields=("DemParams.kn_over_d",)),
+    _T("--kt-over-kn", "tangential over normal contact stiffness, kt/kn", "-",
+       fields=("DemParams.kt_over_kn",)),
+    _T("--damping", "Cundall (non-viscous) damping coefficient", "-",
+       fields=("DemParams.damping",)),
+    _T("--dt-safety", "time step over sqrt(m_min / kn)", "-", fields=("DemParams.dt_safety",)),
+    _T("--rolling-friction", "rolling resistance mu_r: the rolling moment of a contact capped at "
+       "mu_r R* fn (0: free rotation, the paper's)", "-", fields=("DemParams.rolling_friction",)),
+    _T("--rolling-stiffness", "rolling stiffness k_r over kt R*^2 (used with --rolling-friction "
+       "> 0)", "-", fields=("DemParams.rolling_stiffness",)),
+    # -- the loading ---------------------------------------------------------------------------
+    _T("--sigma2", "confining (lateral) stress sigma2, the isotropic start's p0", "Pa", "real",
+       0, 1e9, hi_open=False, fields=("HParams.p0",), old=(("--confining", ()),)),
+    _T("--eps1-max", "axial strain eps1 where the drained test ends", "-", "real", 0, 0.5,
+       fields=("BiaxialConfig.eps1_max",), old=(("--eps-max", ()),)),
+    _T("--d-eps1", "axial strain step of the drained path", "-", "real", 0, 0.05,
+       fields=("BiaxialConfig.d_eps1",)),
+    _T("--d-eps1-search", "axial strain step of the drained path during the search", "-",
+       "real", 0, 0.05),
+    _T("--eta-a", "stress ratio eta = q/p of point A (p = (s1 + s2)/2)", "-", "real", 0, 2,
+       old=(("--eta", ()),)),
+    _T("--rate", "axial strain rate", "1/s", "real", 0, 10, hi_open=False,
+       fields=("BurstOptions.rate",)),
+    _T("--compaction-phi-g", "grain friction angle phi_g during the compaction", "deg", "real",
+       0, 90, lo_open=False, old=(("--compaction-friction", ()),)),
+    _T("--save-fractions", "comma-separated fractions of the drained peak eta: the first state "
+       "at each is saved in --out/states (for dem domain, dem burst)", "-", "reals", 0, 1,
+       hi_open=False),
+    _T("--save-etas", "comma-separated eta: the first state at each is saved too", "-", "reals",
+       0, 2),
+    _T("--no-vtk", "no VTK files of the particles", None, "flag"),
+    _T("--post-peak-strain", "a test stops this axial strain after its peak", "-", "real", 0,
+       0.5),
+    _T("--smooth", "axial strain window of the moving average of q for the peak (0: raw)", "-",
+       "real", 0, 0.05, lo_open=False),
+    # -- directional analyses --------------------------------------------------------------------
+    _T("--n-probes", "number of strain probes (directions), uniform before any refinement", "-",
+       "int", 8, None, False, old=(("--n", ("hmodel probes", "hmodel domain")),)),
+    _T("--strain-norm", "norm |d eps| of a strain probe (a rate probe: small)", "-", "real", 0,
+       1e-2, hi_open=False, old=(("--norm", ("hmodel probes",)),)),
+    _T("--stress-norm", "norm |d sigma| of a stress probe", "Pa", "real", 0, 1e8,
+       fields=("ProbeOptions.norm",),
+       old=(("--norm", ("dem probes", "dem domain")), ("--sigma-norm", ("hmodel probes",)))),
+    _T("--stress-step", "spacing of the stress probes' directions alpha_sigma", "deg", "real",
+       0, 360, hi_open=False),
+    _T("--step-q3", "spacing of the probe directions alpha_sigma in the third quadrant", "deg",
+       "real", 0, 90, hi_open=False),
+    _T("--step-other", "spacing of the probe directions alpha_sigma elsewhere", "deg", "real",
+       0, 90, hi_open=False),
+    _T("--directions", "comma-separated probe directions alpha_sigma, in place of --step-q3 and "
+       "--step-other", "deg", "reals", 0, 360, lo_open=False),
+    _T("--ramp-steps", "length of a probe's stress ramp", "steps", "int",
+       fields=("ProbeOptions.ramp_steps",)),
+    _T("--max-steps", "cap of a run: undecided when reached", "steps", "int", 1, None, False,
+       fields=("ProbeOptions.max_steps", "BurstOptions.max_steps")),
+    _T("--runaway-ratio", "failure: |d eps|/|d eps_elastic| beyond this with the wall stresses "
+       "lost", "-", fields=("ProbeOptions.runaway_ratio",)),
+    _T("--fail-ratio", "failure: |d eps|/|d eps_elastic| beyond this", "-",
+       fields=("ProbeOptions.fail_ratio",)),
+    _T("--plastic-tol", "a probe is plastic if |d eps_p| > this |d eps_elastic|", "-",
+       fields=("ProbeOptions.plastic_tol",)),
+    _T("--relax-max-steps", "cap of a relaxation at fixed strain or stress", "steps", "int",
+       fields=("ProbeOptions.relax_max_steps", "BurstOptions.relax_max_steps")),
+    _T("--unbalanced-tol", "equilibrium: unbalanced-force ratio at every check of the window",
+       "-", fields=("ProbeOptions.unbalanced_tol", "BurstOptions.unbalanced_tol")),
+    _T("--stress-tol", "equilibrium: stress error at every check of the window (the wall "
+       "stresses' from their targets; dem burst: |c - c_target|)", "Pa",
+       fields=("ProbeOptions.stress_tol", "BurstOptions.stress_tol")),
+    _T("--strain-tol", "equilibrium: strain drift over the window over the strain scale (a "
+       "probe's |d eps|; dem burst: the larger of the strain since the switch and the elastic "
+       "strain of 2.5 kPa)", "-", fields=("ProbeOptions.strain_tol", "BurstOptions.strain_tol")),
+    _T("--ke-tol", "equilibrium: backbone kinetic energy per disk", "J",
+       fields=("ProbeOptions.ke_tol", "BurstOptions.ke_tol")),
+    _T("--window", "equilibrium window at 1000 disks (scaled with sqrt(n))", "steps", "int",
+       fields=("ProbeOptions.window", "BurstOptions.window")),
+    _T("--no-relax", "probe from the saved state as is (no stress-controlled relaxation)", None,
+       "flag"),
+    _T("--no-hmodel", "leave the H-model's boundary out of the figure", None, "flag"),
+    # -- the burst experiment (docs/burst.md) ----------------------------------------------------
+    _T("--ratios", "comma-separated R of the proportional strain paths d eps2 = R d eps1, each "
+       "finite and < 0 (-1: isochoric)", "-", "reals", fields=("BurstConfig.ratios",),
+       old=(("--burst-ratios", ("dem crosscheck",)),)),
+    _T("--start-fractions", "comma-separated start states, fractions f of the drained peak eta",
+       "-", "reals", 0, 1, hi_open=False, fields=("BurstConfig.start_fractions",),
+       old=(("--burst-fractions", ("dem crosscheck",)),)),
+    _T("--dc", "step of c = s1 + R s2 held after the switch (dG = B dc per unit thickness)",
+       "Pa", "real", 0, None, False, fields=("BurstConfig.dc", "BurstOptions.dc")),
+    _T("--path-strain", "largest axial strain of a proportional path from its start", "-",
+       "real", 0, 0.5, fields=("BurstConfig.path_strain", "BurstOptions.path_strain")),
+    _T("--path-d-eps1", "axial strain step of the proportional paths", "-", "real", 0, 0.05,
+       fields=("BurstConfig.path_d_eps1",)),
+    _T("--width", "specimen width B", "m", "real", 0, None,
+       fields=("Specimen.width", "BiaxialConfig.width")),
+    _T("--height", "specimen height H", "m", "real", 0, None,
+       fields=("Specimen.height", "BiaxialConfig.height")),
+    _T("--damping-ratio", "damping ratio zeta of the lowest elastic mode (mass-proportional "
+       "damping)", "-", "real", 0, 1, False, fields=("Dynamics.damping_ratio",
+                                                       "BurstConfig.damping_ratio")),
+    _T("--steps-per-period", "time steps in the lowest elastic period T1", "-", "int", 10, None,
+       False, fields=("Dynamics.steps_per_period", "BurstConfig.steps_per_period")),
+    _T("--no-cone", "no directional analysis (where each path's strain direction enters the "
+       "cone W2 <= 0; the first W2 = 0 of the drained path)", None, "flag"),
+    _T("--peak-drop", "c this far below its largest confirms the peak", "Pa",
+       fields=("BurstOptions.peak_drop",)),
+    _T("--peak-strain", "or the path this far beyond the largest c", "-",
+       fields=("BurstOptions.peak_strain",)),
+    _T("--below-rise", "below: from the first equilibrium of the staircase whose c reaches "
+       "c_start + this (c_peak - c_start), all at rest", "-", fields=("BurstOptions.below_rise",)),
+    _T("--hold", "how G is held after the switch: a dead load on the tied walls (one dynamic "
+       "degree of freedom, no servo) or the servo on c", None, "choice",
+       fields=("BurstOptions.hold",)),
+    _T("--wall-mass", "the walls' generalized mass m_G under the dead load", "kg",
+       fields=("BurstOptions.wall_mass",)),
+    _T("--wall-period-steps", "the wall-mass rule: the walls' period on their contact stiffness",
+       "steps", fields=("BurstOptions.wall_period_steps",)),
+    _T("--stairs", "the staircase's first step of c is (loaded peak - c at rest) / this", "-",
+       "int", fields=("BurstOptions.stairs",)),
+    _T("--max-holds", "cap of the staircase's holds (the search then ends without a past run)",
+       "-", "int", fields=("BurstOptions.max_holds",)),
+    _T("--probe-d-eps1", "the kinematic probe at every equilibrium: axial strain moved along "
+       "the path (docs/burst.md)", "-", fields=("BurstOptions.probe_d_eps1",)),
+    _T("--probe-rate", "the kinematic probe's axial strain rate (at most --rate)", "1/s",
+       fields=("BurstOptions.probe_rate",)),
+    _T("--no-probes", "no kinematic probes (no k_path, no verdict of the theory)", None, "flag"),
+    _T("--fail-strain", "failure: |d eps| since the switch beyond this", "-",
+       fields=("BurstOptions.fail_strain",)),
+    # -- the fit of the H-model --------------------------------------------------------------
+    _T("--free", "comma-separated free parameters", None, "text"),
+    _T("--bounds", "search ranges NAME=LO:HI,... (SI units, degrees)", None, "text"),
+    _T("--starts", "starts of the search: the given values, then a seeded Latin hypercube", "-",
+       "int", 1, None, False),
+    _T("--w-epsv", "weight of eps_v against q, each scaled by its largest |value| (0: q only)",
+       "-", "real", 0, None, False),
+    _T("--max-nfev", "residual evaluations per start (a Jacobian costs 2 more paths per free "
+       "parameter)", "-", "int", 1, None, False),
+    # -- the FE specimen ---------------------------------------------------------------------
+    _T("--nx", "cells across the width", "-", "int", fields=("BiaxialConfig.nx",)),
+    _T("--ny", "cells along the height", "-", "int", fields=("BiaxialConfig.ny",)),
+    _T("--mesh", "cell kind of the generated mesh", None, "choice",
+       fields=("BiaxialConfig.mesh_kind",)),
+    _T("--imperfection", "weak zone of the specimen", None, "choice",
+       fields=("BiaxialConfig.imperfection",)),
+    _T("--imp-size", "size of the weak zone over the width (spot radius, band half-width)",
+       "-", fields=("BiaxialConfig.imp_size",)),
+    _T("--imp-phi-g", "phi_g of the weak zone, or none", "deg", "text",
+       fields=("BiaxialConfig.imp_phi_g",)),
+    _T("--imp-alpha0", "alpha0 of the weak zone, or none", "deg", "text",
+       fields=("BiaxialConfig.imp_alpha0",)),
+    _T("--imp-angle", "angle of the weak band from the horizontal", "deg",
+       fields=("BiaxialConfig.imp_angle",)),
+    _T("--rtol", "Newton: relative tolerance of the residual", "-",
+       fields=("BiaxialConfig.rtol",)),
+    _T("--max-iter", "Newton: iterations per load step at most", "-", "int",
+       fields=("BiaxialConfig.max_iter",)),
+    _T("--max-cutbacks", "Newton: halvings of a load step at most", "-", "int",
+       fields=("BiaxialConfig.max_cutbacks",)),
+    _T("--no-fields", "no fields.xdmf / fields.h5", None, "flag"),
+    _T("--n-sphere", "strain directions sampled for the local minimum of W2", "-", "int",
+       fields=("BiaxialConfig.n_sphere",)),
+    # -- dem bench, calibrate, crosscheck ------------------------------------------------------
+    _T("--steps", "time steps measured", "steps", "int", 1, None, False),
+    _T("--rounds", "interleaved rounds of the measurement", "-", "int", 1, 100, False, False),
+    _T("--busy-core", "measure beside a busy-loop process (a shared machine)", None, "flag"),
+    _T("--target", "the curve to fit", None, "choice"),
+    _T("--vary", "comma-separated DemParams fields (or their option names) to fit", None,
+       "text"),
+    _T("--seeds", "comma-separated samples (seeds) every set is run on; its figures are their "
+       "means", None, "text"),
+    _T("--check-seeds", "comma-separated samples (seeds) the best set is then run on, not among "
+       "--seeds", None, "text"),
+    _T("--initial", "sets of the space-filling (Sobol) design before the model proposes any (at "
+       "least the varied parameters + 2)", "-", "int", 3, 4096, False, False),
+    _T("--batch", "sets the model proposes per round", "-", "int", 1, 64, False, False),
+    _T("--max-evals", "parameter sets at most, the start set included, each run on every seed "
+       "(may be raised on --resume)", "-", "int", 1, 100_000, False, False),
+    _T("--full", "the paper's 12,000 disks at 0.01/s (see README for the time)", None, "flag"),
+    _T("--no-dem", "H-model and FE only", None, "flag", old=(("--skip-dem", ()),)),
+    _T("--no-domain", "no H-model bifurcation domain", None, "flag"),
+    _T("--no-burst", "no burst section (proportional strain paths, c held below / past its "
+       "peak, in the three parts: docs/burst.md)", None, "flag"),
+    _T("--dem-domain", "directional analyses at every saved DEM state (the DEM's bifurcation "
+       "domain)", None, "bool"),
+)}
+
+
+def renamed_to(option, prog) -> list:
+    """The new names, in the vocabulary, of the former option name ``option`` in the command
+    ``prog`` ("python -m dem biaxial")."""
+    command = " ".join(str(prog).split()[2:]) if str(prog).startswith("python -m ") else str(prog)
+    return [t.name for t in VOCABULARY.values() for old, cmds in t.old
+            if old == option and t.name != option and (not cmds or command in cmds)]
+
+
+def option_of(record: str, field: str) -> str:
+    """The option of the record's field ("DemParams", "phi_g" -> "--phi-g"): the vocabulary's
+    term that lists it, else --field-with-dashes."""
+    key = f"{record}.{field}"
+    for t in VOCABULARY.values():
+        if key in t.fields:
+            return t.name
+    return "--" + field.replace("_", "-")
+
+
+def record_error(e, record: str) -> "OptionError":
+    """The OptionError of a record's ValueError ``e`` whose message starts with the field
+    ("rate=0.0; allowed range: ...", "width = 0 is out of range ...", "HParams.kn = ..."), the
+    field replaced by its option ("--rate 0.0; allowed range: ...")."""
+    msg = str(e)
+    m = re.match(r"^(?:\w+\.)?([a-z_][a-z0-9_]*)\s?=\s?(.*)$", msg)
+    if m is None:
+        return OptionError(msg)
+    return OptionError(f"{option_of(record, m.group(1))} {m.group(2)}")
+
+
+def _default_text(term, default):
+    if term.kind == "flag":
+        return "off"
+    if isinstance(default, (list, tuple)):
+        return ",".join(f"{v:g}" if isinstance(v, float) else str(v) for v in default)
+    if isinstance(default, float):
+        return f"{default:g}"
+    return str(default)
+
+
+def add(ap, name, default=None, *, note="", record=None, default_text=None, required=False,
+        many=False, parse=None, choices=None, dest=None, metavar=None, flag_value=True):
+    """Add the vocabulary's option ``name`` to the parser (or group) ``ap``, its help written
+    from the term: what it is, [unit], the range the parser checks, the default (``default``,
+    or ``default_text`` where the default is worked out later; required: "required").
+    ``record``: the record whose validation checks the value (a field of it is among the term's
+    ``fields``): the parser checks only the type, the command validates the record before any
+    computation and names the option with ``record_error`` / ``param_option_error``.
+    ``note``: what the value does in this command, after the term's text; ``many``: a
+    comma-separated list of the term's kind; ``parse``: the text's parser (kind "text", or a
+    list of checked values). ``flag_value``: False for a "--no-x" flag stored in ``dest``
+    (True by default)."""
+    t = VOCABULARY[name]
+    if record is not None and not any(f.startswith(record + ".") for f in t.fields):
+        raise KeyError(f"{name}: no field of {record} in the vocabulary's term")
+    ranged = t.bounded and record is None
+    lo, hi = (t.lo, t.hi) if ranged else (None, None)
+    unit = t.unit if t.unit not in (None, "-") else ""
+    kw = {}
+    if t.kind in ("real", "reals"):
+        one = real if t.kind == "real" and not many else reals
+        kw["type"] = parse or one(lo, hi, lo_open=t.lo_open, hi_open=t.hi_open, unit=unit)
+    elif t.kind == "int":
+        kw["type"] = parse or integer(lo, hi)
+    elif t.kind in ("text", "path", "choice"):
+        if parse is not None:
+            kw["type"] = parse
+        if choices is not None:
+            kw["choices"] = choices
+    if t.kind == "flag":
+        kw["action"] = "store_true" if flag_value else "store_false"
+    elif t.kind == "bool":
+        kw["action"] = argparse.BooleanOptionalAction
+    if dest:
+        kw["dest"] = dest
+    if metavar:
+        kw["metavar"] = metavar
+    text = t.help + (f" [{t.unit}]" if t.unit else "") + (f"; {note}" if note else "")
+    if ranged:
+        text += f"; allowed {t.range_text()}"
+    if choices:
+        text += f"; one of {', '.join(choices)}"
+    if required:
+        text += "; required"
+    else:
+        d = default_text if default_text is not None else _default_text(t, default)
+        text += f"; default {d}"
+    if t.kind == "flag":
+        default = not flag_value
+    return ap.add_argument(name, default=default, required=required,
+                           help=text.replace("%", "%%"), **kw)
+
+
+def add_out(ap, what="folder"):
+    """--out, required everywhere (the rule: a command writes only where it is told, and the
+    output folder records the command that wrote it); ``what`` "folder" (with --force) or
+    "file" (the parameter file of ``params``)."""
+    if what == "file":
+        return add(ap, "--out", required=True, note="the parameter file (JSON) to write",
+                   metavar="FILE")
+    add(ap, "--out", required=True, metavar="DIR", note="a folder (created) that records the "
+        "command that wrote it (command.json); another command's folder is refused unless "
+        "--force")
+    add(ap, "--force")
 
 
 def check_out_dir(path, option="--out"):
@@ -222,35 +639,32 @@ def check_memory(nbytes, what, options, allowed="a smaller run"):
                           f"{avail / 1e9:.3g} GB available: allowed {allowed}")
 
 
-def param_option_error(e, option_of=None):
+def param_option_error(e, options=None):
     """The OptionError of an HParams ``ParamError`` ``e``, naming the command-line option of the
-    field (``--phi-g`` for phi_g, ``--sigma2`` for p0, or ``option_of[field]``)."""
-    opts = {"p0": "--sigma2", **(option_of or {})}
-    opt = opts.get(e.name, "--" + e.name.replace("_", "-"))
+    field (``--phi-g`` for phi_g, ``--sigma2`` for p0, or ``options[field]``)."""
+    opt = (options or {}).get(e.name) or option_of("HParams", e.name)
     return OptionError(f"{opt} {e.value!r} is out of range: allowed {e.allowed}")
 
 
 # the options of the HParams fields (p0 is the confining stress of a test: --sigma2)
-PARAM_OPTIONS = (("--kn", "kn", "normal contact stiffness [N/m]"),
-                 ("--kt", "kt", "tangential contact stiffness [N/m]"),
-                 ("--phi-g", "phi_g", "contact friction angle [deg]"),
-                 ("--r-g", "r_g", "grain radius [m]"),
-                 ("--alpha0", "alpha0", "initial hexagon opening angle [deg]"),
-                 ("--n-dir", "n_dir", "number of hexagon orientations"),
-                 ("--thickness", "thickness", "slab thickness h [m] (file: null for 2 r_g)"),
-                 ("--fabric-a", "fabric_a", "fabric anisotropy a, |a| < 1"),
-                 ("--fabric-b", "fabric_b", "fabric direction b [deg]"))
+PARAM_OPTIONS = tuple((t.name, f.split(".", 1)[1]) for t in VOCABULARY.values() for f in t.fields
+                      if f.startswith("HParams.") and f != "HParams.p0")
 
 
 def add_param_options(ap: argparse.ArgumentParser):
     """--params FILE and an option for every HParams field but p0 (the commands' --sigma2), all
-    None unless given: the file (or Table I) supplies the rest (``params_from``)."""
+    None unless given: the file (or Table I) supplies the rest (``params_from``), HParams checks
+    them."""
+    from .params import HParams
+    d = HParams()
     g = ap.add_argument_group("model parameters (Table I unless --params FILE; an option given "
                               "overrides the file)")
-    g.add_argument("--params", default=None, metavar="FILE",
-                   help="HParams file (python -m hmodel params --out FILE; docs/parameters.md)")
-    for option, name, text in PARAM_OPTIONS:
-        g.add_argument(option, type=int if name == "n_dir" else float, default=None, help=text)
+    add(g, "--params", metavar="FILE", note="of the H-model: python -m hmodel params --out FILE",
+        default_text="Table I")
+    for option, name in PARAM_OPTIONS:
+        add(g, option, record="HParams", metavar=name.upper(),
+            default_text=f"the file's, else Table I's "
+                         f"{'null (2 r_g)' if getattr(d, name) is None else format(getattr(d, name), 'g')}")
 
 
 def params_from(args, p0=None):
@@ -264,7 +678,7 @@ def params_from(args, p0=None):
     from .params import HParams, ParamError, load_params
     path = getattr(args, "params", None)
     base = load_params(path) if path else HParams()
-    given = [(o, n, getattr(args, n)) for o, n, _ in PARAM_OPTIONS if getattr(args, n, None) is not None]
+    given = [(o, n, getattr(args, n)) for o, n in PARAM_OPTIONS if getattr(args, n, None) is not None]
     sigma2 = getattr(args, "sigma2", None)
     if p0 is not None:
         given.append(("p0", "p0", float(p0)))
@@ -290,12 +704,15 @@ def record_params(out_dir, params, note="") -> str:
 class Stage:
     """Where a command is, for the line printed when it is interrupted: ``at(text)`` as it goes
     (or ``at(callable)``, asked only when the line is printed: e.g. the last row a file holds
-    then), ``wrote(name)`` for every output file completed."""
+    then), ``wrote(name)`` for every output file completed. A command that says nothing of its
+    files gets them named all the same: the files of ``out_dir`` new or changed since
+    ``run_cli`` started it (``before``, a ``snapshot``)."""
 
     def __init__(self, out_dir=None):
         self.where = "start-up"
         self.out_dir = out_dir
         self.written = []
+        self.before = None
 
     def at(self, text):
         self.where = text
@@ -303,11 +720,160 @@ class Stage:
     def wrote(self, *names):
         self.written.extend(names)
 
+    def changed(self) -> list:
+        """The files of ``out_dir`` written since ``before`` (relative paths, sorted)."""
+        if self.out_dir is None or self.before is None:
+            return []
+        now = snapshot(self.out_dir)
+        return sorted(k for k, v in now.items() if self.before.get(k) != v)
+
     def line(self, signame):
-        done = (f"complete in {self.out_dir}: {', '.join(self.written)}" if self.written
-                else "no output written yet")
+        if self.written:
+            done = f"complete in {self.out_dir}: {', '.join(self.written)}"
+        else:
+            new = _grouped(self.changed())
+            shown = ", ".join(new[:12]) + (f" and {len(new) - 12} more" if len(new) > 12 else "")
+            done = f"written so far in {self.out_dir}: {shown}" if new else "no output written yet"
         where = self.where() if callable(self.where) else self.where
         return f"interrupted ({signame}) during {where}; {done}"
+
+
+def _grouped(paths) -> list:
+    """The files of a folder as a line names them: its own files, then each sub-folder as
+    "states/ (6 files)" (or its one file's path)."""
+    top, sub = [], {}
+    for p in paths:
+        head, _, rest = p.partition(os.sep)
+        if rest:
+            sub.setdefault(head, []).append(p)
+        else:
+            top.append(p)
+    return top + [v[0] if len(v) == 1 else f"{k}{os.sep} ({len(v)} files)"
+                  for k, v in sorted(sub.items())]
+
+
+# -- whose folder: every command that writes a folder records itself there -------------------
+OWNER_FILE = "command.json"
+_SNAPSHOT_MAX = 20_000      # files listed at most (a DEM folder holds a few thousand)
+
+
+def snapshot(path) -> dict:
+    """Relative path -> (size, mtime_ns) of every file under ``path`` ({} if it is no folder)."""
+    out = {}
+    if not os.path.isdir(path):
+        return out
+    for root, _, files in os.walk(path):
+        for f in files:
+            full = os.path.join(root, f)
+            try:
+                st = os.stat(full)
+            except OSError:
+                continue
+            out[os.path.relpath(full, path)] = (st.st_size, st.st_mtime_ns)
+            if len(out) >= _SNAPSHOT_MAX:
+                return out
+    return out
+
+
+def folder_owner(path):
+    """The command that wrote the folder ``path`` ("python -m dem biaxial"): its command.json,
+    else the note of its params.json (every command's starts with the command: folders written
+    before command.json), else None (no record: a folder of no command, or empty)."""
+    import json
+    try:
+        with open(os.path.join(path, OWNER_FILE)) as f:
+            c = json.load(f).get("command")
+        if isinstance(c, str) and c:
+            return c
+    except (OSError, ValueError, AttributeError):
+        pass
+    try:
+        with open(os.path.join(path, "params.json")) as f:
+            note = json.load(f).get("note", "")
+        m = re.match(r"(python -m (?:hmodel|fem|dem) [a-z]+)\b", note or "")
+        if m:
+            return m.group(1)
+    except (OSError, ValueError, AttributeError, TypeError):
+        pass
+    return None
+
+
+def check_owner(path, command, force=False, option="--out"):
+    """Refuse, before anything is written, an output folder another command wrote (its
+    command.json, or its params.json's note), unless ``force``."""
+    owner = folder_owner(path) if os.path.isdir(path) else None
+    if owner is not None and owner != command and not force:
+        raise OptionError(f"{option} {path}: the output folder of {owner}, not of {command}: "
+                          "allowed a new or empty folder, or one of this command (--force writes "
+                          "into it all the same)")
+
+
+def mark_owner(path, command, argv=None, before=None):
+    """Record ``command`` in ``path``/command.json if the folder is its output (it wrote
+    something since ``before``, a ``snapshot``) and the folder does not say so already (a
+    forced run records the command it wrote over)."""
+    import json
+    import time as _time
+    if not os.path.isdir(path):
+        return
+    owner = folder_owner(path)
+    if owner == command and os.path.exists(os.path.join(path, OWNER_FILE)):
+        return
+    if before is not None and snapshot(path) == before:
+        return          # nothing written (refused, or interrupted before any file)
+    doc = {"command": command, "argv": list(argv) if argv is not None else None,
+           "written": _time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    if owner is not None and owner != command:
+        doc["written_over"] = owner
+    from .io import atomic_write_bytes
+    try:
+        atomic_write_bytes(os.path.join(path, OWNER_FILE), (json.dumps(doc, indent=1) + "\n").encode())
+    except OSError:
+        pass
+
+
+# -- file arguments: checked for what they should be, one line naming what was expected -------
+def check_file(path, option, what):
+    """``path`` must be an existing file: else an OptionError naming ``what`` it should be."""
+    if os.path.isdir(path):
+        raise OptionError(f"{option} {path}: is a folder: allowed {what}")
+    if not os.path.exists(path):
+        raise OptionError(f"{option} {path}: no such file: allowed {what}")
+
+
+def check_folder(path, option, what, commands=()):
+    """``path`` must be an existing folder (of one of ``commands``, where its command.json or
+    params.json says whose it is): else an OptionError naming ``what`` it should be."""
+    if os.path.isfile(path):
+        raise OptionError(f"{option} {path}: is a file, not a folder: allowed {what}")
+    if not os.path.isdir(path):
+        raise OptionError(f"{option} {path}: no such folder: allowed {what}")
+    owner = folder_owner(path)
+    if commands and owner is not None and owner not in commands:
+        raise OptionError(f"{option} {path}: the output folder of {owner}: allowed {what}")
+
+
+def check_csv(path, columns, option, what=None):
+    """``path`` must be a CSV file whose header row names every one of ``columns`` (a sequence:
+    each a name, or a tuple of alternatives); an OptionError of one line naming what was
+    expected otherwise (never the reader's own pages of messages)."""
+    names = " and ".join(c if isinstance(c, str) else " or ".join(c) for c in columns)
+    what = what or f"a CSV file with a header row naming {names}"
+    check_file(path, option, what)
+    try:
+        with open(path, encoding="utf-8") as f:
+            head = f.readline()
+    except UnicodeDecodeError:
+        raise OptionError(f"{option} {path}: not text: allowed {what}") from None
+    except OSError as e:
+        raise OptionError(f"{option} {path}: {(e.strerror or str(e)).lower()}: allowed {what}") from None
+    have = [h.strip().strip('"') for h in head.strip().split(",")]
+    missing = [c if isinstance(c, str) else " or ".join(c) for c in columns
+               if not any(x in have for x in ((c,) if isinstance(c, str) else c))]
+    if missing or len(have) < 2:
+        shown = head.strip()[:60] + ("..." if len(head.strip()) > 60 else "")
+        raise OptionError(f"{option} {path}: no column {', '.join(missing) or names} in its first "
+                          f"line ({shown!r}): allowed {what}")
 
 
 class Terminated(BaseException):
@@ -367,10 +933,16 @@ def run_cli(parser, argv, run, errors=(ValueError,)) -> int:
     stage = Stage()
     try:
         args = parser.parse_args(argv)
+        command = command_of(parser, args)
+        folder = writes_folder(parser, args)
+        if folder:
+            check_owner(args.out, command, getattr(args, "force", False))
     except OptionError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     stage.out_dir = getattr(args, "out", None)
+    if folder:
+        stage.before = snapshot(args.out)
     try:
         with _sigterm_raises():
             return run(args, stage)
@@ -383,6 +955,28 @@ def run_cli(parser, argv, run, errors=(ValueError,)) -> int:
     except Terminated:
         print(stage.line("SIGTERM"), file=sys.stderr)
         return 143
+    finally:
+        if folder:
+            mark_owner(args.out, command, sys.argv[1:] if argv is None else argv, stage.before)
+
+
+def _chosen(parser, args):
+    """The subparser ``args`` were parsed by (``parser`` itself if it has no subcommands)."""
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            return a.choices.get(getattr(args, a.dest, None) or "", parser)
+    return parser
+
+
+def command_of(parser, args) -> str:
+    """"python -m dem biaxial": the command ``args`` were parsed for."""
+    return _chosen(parser, args).prog
+
+
+def writes_folder(parser, args) -> bool:
+    """True if the command writes an output folder (--out DIR, with --force)."""
+    return ("--force" in _chosen(parser, args)._option_string_actions
+            and getattr(args, "out", None) is not None)
 
 
 # the line that announces a compilation of the kernels (CLI and library alike), with its time:

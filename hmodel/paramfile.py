@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import fields
 
 __all__ = ["RESERVED", "field_kinds", "values_of", "write_params", "read_params", "override"]
@@ -80,16 +81,23 @@ def _typed(key, v, kind, unit):
     raise ValueError(f"{key} = {json.dumps(v)} ({_json_type(v)}): allowed {allowed}{u}")
 
 
-def read_params(path, cls, model: str, units: dict, build=None, option: str = "--params"):
+def read_params(path, cls, model: str, units: dict, build=None, option: str = "--params",
+                migrate=None):
     """The record of class ``cls`` in the parameter file ``path``, built by ``build(values)``
-    (default ``cls(**values)``, whose validation gives the ranges). Every refusal is a
-    ValueError of one line starting ``"{option} {path}: "`` and naming the key."""
+    (default ``cls(**values)``, whose validation gives the ranges). ``migrate(doc)``: the
+    file's object with keys renamed since under their new names (an old file still loads).
+    Every refusal is a ValueError of one line starting ``"{option} {path}: "`` and naming the
+    key."""
     head = f"{option} {path}"
+    if os.path.isdir(path):
+        raise ValueError(f"{head}: is a folder: allowed a parameter file (JSON; python -m {model} "
+                         "params --out FILE writes one)")
     try:
         with open(path) as f:
             text = f.read()
     except OSError as e:
-        raise ValueError(f"{head}: {(e.strerror or str(e)).lower()}") from None
+        raise ValueError(f"{head}: {(e.strerror or str(e)).lower()}: allowed a parameter file "
+                         f"(JSON; python -m {model} params --out FILE writes one)") from None
     except UnicodeDecodeError:
         raise ValueError(f"{head}: not JSON (not text)") from None
     try:
@@ -97,6 +105,8 @@ def read_params(path, cls, model: str, units: dict, build=None, option: str = "-
     except ValueError as e:
         raise ValueError(f"{head}: not JSON ({e})") from None
     kinds = field_kinds(cls)
+    if migrate is not None:
+        doc = migrate(doc)
     if not isinstance(doc, dict):
         raise ValueError(f"{head}: allowed a JSON object of the {cls.__name__} fields "
                          f"(python -m {model} params --out FILE writes one)")

@@ -15,7 +15,7 @@ print(f"H-model: peak q {target['peak_q'] / 1e3:.1f} kPa, 95 % of it first at ep
       f"{100 * target['eps1_95']:.3f} %, secant {target['secant'] / 1e6:.1f} MPa")
 
 # the search alone, on figures that are analytic functions of the parameters (u in [0, 1]^2)
-space = C.make_space(("kn_over_d", "friction_deg"), DemParams())
+space = C.make_space(("kn_over_d", "phi_g"), DemParams())
 
 
 def evaluate(points, stage):

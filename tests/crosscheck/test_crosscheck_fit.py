@@ -14,7 +14,8 @@ def test_param_argv_gives_the_parameters_bit_for_bit():
     from dem.crosscheck_fit import param_argv
     P = HParams(kn=6522853.516818995, kt=309858.622001449, phi_g=7.96141084437897,
                 alpha0=64.47550826699585, p0=202536.92708975545, fabric_a=0.1, thickness=2.5e-3)
-    args = cli.build_parser().parse_args(["probes", *param_argv(P), "--sigma2", repr(P.p0)])
+    args = cli.build_parser().parse_args(["probes", *param_argv(P), "--sigma2", repr(P.p0),
+                                          "--out", "never-written"])
     assert cli.params_from(args) == P
 
 

@@ -21,13 +21,13 @@ CASES = [
     (["biaxial", "--threads", "0"], "--threads"),
     (["biaxial", "--n", "0"], "--n"),
     (["biaxial", "--rate", "0"], "--rate"),
-    (["biaxial", "--eps-max", "1"], "--eps-max"),
-    (["biaxial", "--friction", "95"], "--friction"),
+    (["biaxial", "--eps1-max", "1"], "--eps1-max"),
+    (["biaxial", "--phi-g", "95"], "--phi-g"),
     (["biaxial", "--save-fractions", "0.9,1.5"], "--save-fractions"),
     (["probes", "--state", "S", "--workers", "0"], "--workers"),
     (["probes", "--state", "S", "--workers", "-2"], "--workers"),
     (["probes", "--state", "S", "--threads", "0"], "--threads"),
-    (["probes", "--state", "S", "--norm", "0"], "--norm"),
+    (["probes", "--state", "S", "--stress-norm", "0"], "--stress-norm"),
     (["probes", "--state", "S", "--step-q3", "0"], "--step-q3"),
     (["probes", "--state", "S", "--max-steps", "0"], "--max-steps"),
     (["probes", "--state", "S", "--window", "10"], "--window"),
@@ -85,12 +85,17 @@ def test_probes_resume_refuses_a_folder_of_another_state(small_sample, tmp_path,
 
 @pytest.mark.parametrize("sig,code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_interrupt_is_one_line(tmp_path, sig, code):
-    # a run to 10 % strain (a minute), cut at its first progress line
-    rc, err = interrupt_after(["dem", "biaxial", "--n", "300", "--eps-max", "0.1", "--rate",
-                               "0.05", "--out", str(tmp_path / "b"), "--no-vtk"],
-                              "[biaxial] step", sig=sig)
+    # a run to 10 % strain (a minute), cut once it has written its first rows: the line names
+    # the files written so far (issue 32: it said "no output written yet")
+    out = tmp_path / "b"
+    rc, err = interrupt_after(["dem", "biaxial", "--n", "300", "--eps1-max", "0.1", "--rate",
+                               "0.05", "--out", str(out), "--no-vtk"],
+                              "[biaxial] step", sig=sig, until=lambda: (out / "biaxial.csv").exists())
     assert rc == code
+    err = [line for line in err if not line.startswith("[biaxial]")]     # its progress lines
     assert len(err) == 1 and err[0].startswith("interrupted") and "--resume" in err[0], err
+    assert "no output written yet" not in err[0] and f"written so far in {out}: " in err[0], err
+    assert "biaxial.csv" in err[0] and "params.json" in err[0], err
 
 
 def test_scheduler_without_dask_distributed_is_one_line(monkeypatch, tmp_path, capsys):

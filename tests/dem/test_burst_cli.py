@@ -222,7 +222,7 @@ def test_a_state_of_other_parameters_is_refused(biaxial_300, tmp_path, capsys):
     shutil.copytree(biaxial_300, other)
     st, meta = io.load_state(other / "states" / "state_f0.900.npz")
     io.save_state(other / "states" / "state_f0.900.npz",
-                  st._replace(params=st.params.replace(friction_deg=30.0)), meta)
+                  st._replace(params=st.params.replace(phi_g=30.0)), meta)
     out = tmp_path / "out"
     code, err = _run(["burst", "--biaxial", str(other), "--out", str(out)], capsys)
     assert code == 2 and len(err) == 1 and "other parameters" in err[0], err

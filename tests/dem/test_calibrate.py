@@ -4,7 +4,7 @@ conflict, the model of the figures, identifiability), the seeds, the checkpoint 
 nothing, refuses other options), the outputs, bad input.
 
 Most tests replace the DEM run by a synthetic one (``_synthetic_task``: the H-model's own curve
-stretched in strain and in stress by factors that depend on kn_over_d and friction_deg), so the
+stretched in strain and in stress by factors that depend on kn_over_d and phi_g), so the
 search is exercised in well under a second per run; some run the real DEM on 100 disks."""
 import csv
 import functools
@@ -129,7 +129,7 @@ KN_OPT, FR_OPT = 11e9, 33.0      # where the synthetic DEM matches the H-model e
 
 def _stretch(d):
     """Strain and stress factors of the synthetic DEM of parameters d (1, 1 at the optimum)."""
-    return math.sqrt(KN_OPT / d["kn_over_d"]), d["friction_deg"] / FR_OPT
+    return math.sqrt(KN_OPT / d["kn_over_d"]), d["phi_g"] / FR_OPT
 
 
 CALLS = {"n": 0}
@@ -153,8 +153,8 @@ def _synthetic_task(a):
 
 
 def _space():
-    return C.make_space(("kn_over_d", "friction_deg"), DemParams(n=100),
-                        {"kn_over_d": (2e9, 32e9), "friction_deg": (20.0, 50.0)})
+    return C.make_space(("kn_over_d", "phi_g"), DemParams(n=100),
+                        {"kn_over_d": (2e9, 32e9), "phi_g": (20.0, 50.0)})
 
 
 def test_space_maps_and_rounds():
@@ -172,7 +172,7 @@ T3 = {"peak_q": 428e3, "eps1_95": 0.0122, "secant": 90e6}
 
 
 def _space3():
-    return C.make_space(("kn_over_d", "friction_deg", "rolling_friction"), DemParams(n=100))
+    return C.make_space(("kn_over_d", "phi_g", "rolling_friction"), DemParams(n=100))
 
 
 def _analytic(space, figs, log):
@@ -314,13 +314,13 @@ def test_identifiability_names_the_parameter_the_targets_do_not_fix():
     assert idt["singular_values"][-1] < 0.01 * idt["singular_values"][1]
     reg = idt["met_region"]
     assert reg["rolling_friction"][0] < 0.01 and reg["rolling_friction"][1] > 0.29
-    assert space.u_of_axis(1, reg["friction_deg"][1]) - space.u_of_axis(1, reg["friction_deg"][0]) < 0.4
+    assert space.u_of_axis(1, reg["phi_g"][1]) - space.u_of_axis(1, reg["phi_g"][0]) < 0.4
 
 
 # -- the command on the synthetic model ----------------------------------------------------------
 def _run(tmp, **kw):
-    opts = dict(vary=("kn_over_d", "friction"), bounds={"kn_over_d": (2e9, 32e9),
-                                                         "friction_deg": (20.0, 50.0)},
+    opts = dict(vary=("kn_over_d", "phi_g"), bounds={"kn_over_d": (2e9, 32e9),
+                                                         "phi_g": (20.0, 50.0)},
                 initial=8, max_evals=30, eps_max=0.035, workers=1, verbose=False,
                 task=_synthetic_task, seeds=(3, 4), check_seeds=(5,))
     opts.update(kw)
@@ -346,9 +346,9 @@ def test_outputs_and_resume_reruns_nothing(tmp_path):
     assert not (tmp_path / "work").exists()
     p = load_params(tmp_path / "calibrated.json")
     assert p.n == 100 and p.seed == 3
-    assert (p.kn_over_d, p.friction_deg) == tuple(s["best"]["values"])
+    assert (p.kn_over_d, p.phi_g) == tuple(s["best"]["values"])
     rows = _csv(tmp_path / "calibration.csv")
-    assert list(rows[0]) == ["kind", "index", "stage", "kn_over_d", "friction_deg"] + C.CSV_FIXED
+    assert list(rows[0]) == ["kind", "index", "stage", "kn_over_d", "phi_g"] + C.CSV_FIXED
     assert rows[0]["kind"] == "hmodel" and float(rows[0]["peak_q"]) == pytest.approx(428.3e3, rel=1e-3)
     assert float(rows[0]["eps1_peak"]) == pytest.approx(0.0209, abs=1e-4)
     assert float(rows[0]["eps1_95"]) == pytest.approx(0.01222, abs=1e-5)
@@ -360,11 +360,11 @@ def test_outputs_and_resume_reruns_nothing(tmp_path):
     assert runs[-1]["stage"] == "check" and int(runs[-1]["index"]) == s["best"]["index"]
     assert s["check"][0]["seed"] == 5 and s["check"][0]["met"]      # the synthetic DEM has no scatter
     assert s["seeds_spread"]["peak_q"]["max"] == 0.0
-    assert dem[0]["stage"] == "start" and float(dem[0]["friction_deg"]) == 35.0
+    assert dem[0]["stage"] == "start" and float(dem[0]["phi_g"]) == 35.0
     best = min(dem, key=lambda r: (r["met"] != "1", float(r["score"])))
     assert int(best["index"]) == s["best"]["index"] and best["met"] == "1"
     # the synthetic model is exact at (11e9, 33): the best set is close to it
-    assert abs(p.friction_deg / FR_OPT - 1) <= 0.05 and abs(math.sqrt(KN_OPT / p.kn_over_d) - 1) <= 0.25
+    assert abs(p.phi_g / FR_OPT - 1) <= 0.05 and abs(math.sqrt(KN_OPT / p.kn_over_d) - 1) <= 0.25
     curves = _csv(tmp_path / "curves.csv")
     assert {r["curve"] for r in curves} == {"hmodel", "dem_start", "dem_calibrated",
                                             "dem_calibrated_check"}
@@ -373,7 +373,7 @@ def test_outputs_and_resume_reruns_nothing(tmp_path):
                  "## Identifiability at the best set", "calibration_score.png", "| 5 |"):
         assert part in report, part
     summ = json.loads((tmp_path / "summary.json").read_text())
-    assert summ["options"]["vary"] == ["kn_over_d", "friction_deg"]
+    assert summ["options"]["vary"] == ["kn_over_d", "phi_g"]
     assert summ["target_figures"]["peak_q"] == pytest.approx(428.3e3, rel=1e-3)
     before = (tmp_path / "calibration.csv").read_text()
     lines = (tmp_path / "evaluations.jsonl").read_text().count("\n")
@@ -407,7 +407,7 @@ def test_resume_reads_a_checkpoint_of_a_version_without_a_newer_field(tmp_path):
     ck.write_text("\n".join(json.dumps(r) for r in lines) + "\n")
     with pytest.raises(ValueError, match="normal_damping_ratio: 0.0 there, 0.1 now"):
         C.run_calibration(str(tmp_path), DemParams(n=100, seed=3, normal_damping_ratio=0.1),
-                          vary=("kn_over_d", "friction"), bounds={"kn_over_d": (2e9, 32e9)},
+                          vary=("kn_over_d", "phi_g"), bounds={"kn_over_d": (2e9, 32e9)},
                           initial=8, max_evals=5, workers=1, verbose=False,
                           task=_synthetic_task, resume=True, seeds=(3, 4), check_seeds=(5,))
 
@@ -420,8 +420,8 @@ def test_resume_refuses_a_folder_made_with_other_options(tmp_path, change, what)
     before = (tmp_path / "evaluations.jsonl").read_text()
     kw = {k: v for k, v in change.items() if not k.startswith("base_")}
     base = DemParams(n=change.get("base_n", 100), seed=3)
-    opts = dict(vary=("kn_over_d", "friction"), bounds={"kn_over_d": (2e9, 32e9),
-                                                         "friction_deg": (20.0, 50.0)},
+    opts = dict(vary=("kn_over_d", "phi_g"), bounds={"kn_over_d": (2e9, 32e9),
+                                                         "phi_g": (20.0, 50.0)},
                 initial=8, max_evals=3, workers=1, verbose=False, task=_synthetic_task,
                 resume=True, seeds=(3, 4), check_seeds=(6,))
     opts.update(kw)
@@ -482,7 +482,7 @@ def _cli(argv, capsys):
     return e.value.code, capsys.readouterr().err.strip().splitlines()
 
 
-TINY = ["--n", "100", "--rate", "0.05", "--eps-max", "0.02", "--post-peak-strain", "0.005",
+TINY = ["--n", "100", "--rate", "0.05", "--eps1-max", "0.02", "--post-peak-strain", "0.005",
         "--vary", "kn_over_d", "--initial", "3", "--max-evals", "5", "--workers", "1"]
 
 
@@ -497,7 +497,7 @@ def test_cli_end_to_end_on_100_disks_and_resume(tmp_path, capsys):
     rows = _csv(out / "calibration.csv")
     assert [r["stage"] for r in rows] == ["target", "start", "design", "design", "design", "explore1"]
     p = load_params(out / "calibrated.json")
-    assert p.n == 100 and p.friction_deg == 35.0 and p.seed == 1
+    assert p.n == 100 and p.phi_g == 35.0 and p.seed == 1
     assert float(rows[1]["kn_over_d"]) == 32e9
     # each evaluation compacts its own sample: a softer sample has a lower secant modulus
     soft = min(rows[1:], key=lambda r: float(r["kn_over_d"]))
@@ -522,24 +522,25 @@ BAD = [
     (["--vary", "foo"], "--vary"),
     (["--vary", "n"], "--vary"),
     (["--vary", "kn_over_d,kn_over_d"], "--vary"),
-    (["--vary", "friction", "--bounds", "friction=50:20"], "--bounds"),
-    (["--vary", "friction", "--bounds", "friction=20:95"], "--bounds"),
-    (["--vary", "friction", "--bounds", "kn_over_d=1e9:2e9"], "--bounds"),
-    (["--vary", "friction", "--initial", "2"], "--initial"),
-    (["--vary", "friction,kn_over_d", "--initial", "3"], "--initial"),
-    (["--vary", "friction", "--batch", "0"], "--batch"),
-    (["--vary", "friction", "--seeds", "1,1"], "--seeds"),
-    (["--vary", "friction", "--seeds", "a"], "--seeds"),
-    (["--vary", "friction", "--check-seeds", "2"], "--check-seeds"),
-    (["--vary", "friction", "--max-evals", "0"], "--max-evals"),
-    (["--vary", "friction", "--eps-max", "0.001"], "--eps-max"),
-    (["--vary", "friction", "--eps-max", "0.02", "--post-peak-strain", "0.03"],
+    (["--vary", "phi_g", "--bounds", "friction=50:20"], "--bounds"),
+    (["--vary", "phi_g", "--bounds", "friction=20:95"], "--bounds"),
+    (["--vary", "phi_g", "--bounds", "kn_over_d=1e9:2e9"], "--bounds"),
+    (["--vary", "phi_g", "--initial", "2"], "--initial"),
+    (["--vary", "phi_g,kn_over_d", "--initial", "3"], "--initial"),
+    (["--vary", "friction"], "did you mean phi_g?"),
+    (["--vary", "phi_g", "--batch", "0"], "--batch"),
+    (["--vary", "phi_g", "--seeds", "1,1"], "--seeds"),
+    (["--vary", "phi_g", "--seeds", "a"], "--seeds"),
+    (["--vary", "phi_g", "--check-seeds", "2"], "--check-seeds"),
+    (["--vary", "phi_g", "--max-evals", "0"], "--max-evals"),
+    (["--vary", "phi_g", "--eps1-max", "0.001"], "--eps1-max"),
+    (["--vary", "phi_g", "--eps1-max", "0.02", "--post-peak-strain", "0.03"],
      "--post-peak-strain"),
-    (["--vary", "friction", "--smooth", "-1"], "--smooth"),
-    (["--vary", "friction", "--target", "fem"], "--target"),
-    (["--vary", "friction", "--workers", "0"], "--workers"),
-    (["--vary", "friction", "--workers", "1", "--scheduler", "tcp://x:1"], "--scheduler"),
-    (["--vary", "friction", "--friction", "95"], "--friction"),
+    (["--vary", "phi_g", "--smooth", "-1"], "--smooth"),
+    (["--vary", "phi_g", "--target", "fem"], "--target"),
+    (["--vary", "phi_g", "--workers", "0"], "--workers"),
+    (["--vary", "phi_g", "--workers", "1", "--scheduler", "tcp://x:1"], "--scheduler"),
+    (["--vary", "phi_g", "--phi-g", "95"], "--phi-g"),
 ]
 
 
@@ -556,7 +557,7 @@ def test_default_vary_needs_its_fields(tmp_path, capsys):
     --vary and the allowed names; with it, the default parses."""
     names = {f for f in C.calibratable_fields()}
     if "rolling_friction" in names:
-        assert C.parse_vary(C.DEFAULT_VARY) == ("kn_over_d", "friction_deg", "rolling_friction")
+        assert C.parse_vary(C.DEFAULT_VARY) == ("kn_over_d", "phi_g", "rolling_friction")
         return
     out = tmp_path / "out"
     code, err = _cli(["calibrate", "--out", str(out)], capsys)
@@ -611,7 +612,7 @@ def test_sigterm_stops_the_worker_processes_without_waiting_for_their_runs(tmp_p
     # runs to 20 % strain (a minute each, which SIGTERM cuts short); the signal goes once both
     # workers' runs are under way (each has written its run_biaxial checkpoint), not after a delay
     argv = ["dem", "calibrate", "--out", str(out), "--n", "400", "--rate", "0.02",
-            "--eps-max", "0.2", "--post-peak-strain", "0.15", "--vary", "kn_over_d",
+            "--eps1-max", "0.2", "--post-peak-strain", "0.15", "--vary", "kn_over_d",
             "--initial", "3", "--max-evals", "4", "--workers", "2"]
     under_way = lambda: len(list((out / "work").glob("*/checkpoint.npz"))) == 2
     rc, err = interrupt_after(argv, "[calibrate] start:", sig=signal.SIGTERM, until=under_way)
@@ -620,3 +621,20 @@ def test_sigterm_stops_the_worker_processes_without_waiting_for_their_runs(tmp_p
     work = out / "work"
     assert not list(work.glob("*/result.json"))
     assert (out / "evaluations.jsonl").read_text().count("\n") == 1       # the header alone
+
+
+def test_a_checkpoint_of_before_phi_g_resumes(tmp_path):
+    """A calibration checkpoint written while the field was friction_deg (its header's vary,
+    bounds and start parameters, every evaluation's parameters) is read under phi_g."""
+    space = C.make_space(("kn_over_d", "phi_g"), DemParams(n=100),
+                         {"kn_over_d": (2e9, 32e9), "phi_g": (20.0, 50.0)})
+    header = C._header("hmodel", space, DemParams(n=100), (1, 2), 8, 1, 30, 0.05, 200e3, 0.035,
+                       0.01, 0.001)
+    old = json.loads(json.dumps(header).replace('"phi_g"', '"friction_deg"'))
+    assert "friction_deg" in old["vary"] and "friction_deg" in old["start_params"]
+    rec = {"key": "k", "curve": {}, "params": old["start_params"]}
+    ck = tmp_path / "evaluations.jsonl"
+    ck.write_text(json.dumps({"header": old}) + "\n" + json.dumps(rec) + "\n")
+    done = C.read_checkpoint(str(ck), header)
+    (got,) = done.values()
+    assert got["params"]["phi_g"] == 35.0 and "friction_deg" not in got["params"]

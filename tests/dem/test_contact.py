@@ -79,7 +79,7 @@ def test_sliding_disk_reaches_coulomb_limit():
     # Lower disk held by pushing it against the bottom wall by a constant overlap, upper
     # disk pressed on it and spun so that the contact slides: the tangential force must saturate at
     # mu * fn exactly (the cap), and stay below before sliding.
-    p = DemParams(n=2, r_min=0.01, r_max=0.01, damping=0.0, friction_deg=35.0)
+    p = DemParams(n=2, r_min=0.01, r_max=0.01, damping=0.0, phi_g=35.0)
     r = 0.01
     overlap = 1e-5
     x = np.array([[0.0, 0.0], [0.0, 2 * r - overlap]])
@@ -112,7 +112,7 @@ def test_frictionless_undamped_energy_conservation():
     # conserves a shadow energy to O((omega dt)^2) ~ 1e-2 at worst for multi-contact
     # disks; a missing factor in a force or an integrator bug gives drifts of tens of %.
     rng = np.random.default_rng(3)
-    p = DemParams(n=30, r_min=0.01, r_max=0.015, damping=0.0, friction_deg=0.0,
+    p = DemParams(n=30, r_min=0.01, r_max=0.015, damping=0.0, phi_g=0.0,
                   dt_safety=0.1)
     g = np.stack(np.meshgrid(np.arange(6), np.arange(5)), -1).reshape(-1, 2) * 0.031 + 0.02
     r = rng.uniform(0.01, 0.015, 30)

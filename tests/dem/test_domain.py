@@ -16,7 +16,7 @@ ALPHAS = ["0", "180", "240"]
 def biaxial_dir(tmp_path_factory):
     from dem.__main__ import main
     out = tmp_path_factory.mktemp("bx")
-    main(["biaxial", "--n", "300", "--seed", "1", "--rate", "0.05", "--eps-max", "0.02",
+    main(["biaxial", "--n", "300", "--seed", "1", "--rate", "0.05", "--eps1-max", "0.02",
           "--out", str(out), "--no-vtk", "--save-fractions", "0.8,0.9,0.97"])
     return out
 

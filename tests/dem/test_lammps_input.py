@@ -20,7 +20,7 @@ def test_lammps_files_are_this_sample_and_contact_law(small_sample, tmp_path):
     atoms = np.array([[float(v) for v in line.split()] for line in data[start:start + n]])
     assert np.array_equal(atoms[:, 2], 2 * st.r)                 # diameters, full precision
     assert np.array_equal(atoms[:, 4:6], st.x)                   # positions
-    mu = math.tan(math.radians(p.friction_deg))
+    mu = math.tan(math.radians(p.phi_g))
     assert f"pair_style gran/hooke/history {p.kn!r} {p.kt!r} 0.0 0.0 {mu!r} 0" in text
     assert f"density/disc {p.density * p.thickness!r}" in text   # disk masses, not spheres'
     assert f"timestep {p.dt!r}" in text and f"neighbor {p.skin!r} bin" in text

@@ -26,9 +26,9 @@ from dem.walls import strain_rate
 R = 0.01      # disk radius of the analytic cases [m]
 
 
-def _pair(dt_safety, x, walls, v, friction_deg=0.0, damping=0.0, n=2):
+def _pair(dt_safety, x, walls, v, phi_g=0.0, damping=0.0, n=2):
     """Disks of radius R at ``x`` with velocities ``v``, fixed walls (strain control at rate 0)."""
-    p = DemParams(n=n, damping=damping, friction_deg=friction_deg, dt_safety=dt_safety,
+    p = DemParams(n=n, damping=damping, phi_g=phi_g, dt_safety=dt_safety,
                   r_min=R, r_max=R)
     sim = Simulation.new(p, np.array(x, float), np.full(n, R), np.array(walls, float))
     sim.set_control(strain_rate(0.0, 0.0, sim.ref_len))
@@ -95,7 +95,7 @@ def test_sheared_pair_dissipates_mu_fn_times_the_slip():
     delta, speed = 2e-11, 1e-5
     x = [[0.5 - R + delta / 2, 0.5], [0.5 + R - delta / 2, 0.5]]
     sim = _pair(0.2, x, [x[0][0] - R + delta, x[1][0] + R - delta, 0.0, 1.0],
-                [[0.0, speed], [0.0, -speed]], friction_deg=30.0)
+                [[0.0, speed], [0.0, -speed]], phi_g=30.0)
     p = sim.params
     led = Ledger(sim)
     h = 0.5 * sim.dt

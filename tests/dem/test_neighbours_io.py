@@ -125,7 +125,7 @@ def test_love_weber_equals_wall_stress_at_equilibrium(small_sample):
 # Bad input
 # --------------------------------------------------------------------------------------
 @pytest.mark.parametrize("field,value", [("r_min", -0.001), ("kn_over_d", 0.0),
-                                         ("friction_deg", 90.0), ("kt_over_kn", 0.0),
+                                         ("phi_g", 90.0), ("kt_over_kn", 0.0),
                                          ("density", -1.0), ("damping", 1.5)])
 def test_bad_params_raise_valueerror_naming_field(field, value):
     with pytest.raises(ValueError, match=field) as e:
@@ -212,6 +212,6 @@ def test_state_params_must_be_complete():
     d = DemParams().to_dict()
     with pytest.raises(ValueError, match="unknown keys"):
         DemParams.from_dict({**d, "kn_typo": 1.0})
-    d.pop("friction_deg")
+    d.pop("phi_g")
     with pytest.raises(ValueError, match="missing keys"):
         DemParams.from_dict(d)

@@ -2,7 +2,7 @@
 (`porosity after compaction=0.17286062490718235`) and no numpy arrays (`stress=[188853.1 ...]`)."""
 import re
 
-BIAXIAL = ["biaxial", "--n", "100", "--seed", "3", "--rate", "0.5", "--eps-max", "0.004",
+BIAXIAL = ["biaxial", "--n", "100", "--seed", "3", "--rate", "0.5", "--eps1-max", "0.004",
            "--no-vtk", "--save-fractions", "1", "--threads", "1"]
 
 

@@ -27,11 +27,11 @@ def test_params_file_round_trip_and_options_on_top(tmp_path, capsys):
     assert d == DemParams().to_dict()                 # the paper's stated set, every field
     g = tmp_path / "q.json"
     capsys.readouterr()
-    main(["params", "--params", str(f), "--friction", "30", "--kn-over-d", "1e9", "--n", "500",
+    main(["params", "--params", str(f), "--phi-g", "30", "--kn-over-d", "1e9", "--n", "500",
           "--out", str(g)])
-    assert load_params(g) == DemParams(friction_deg=30.0, kn_over_d=1e9, n=500)
+    assert load_params(g) == DemParams(phi_g=30.0, kn_over_d=1e9, n=500)
     out = capsys.readouterr().out
-    assert "--friction 30 overrides the file's friction_deg 35" in out and "--n 500" in out
+    assert "--phi-g 30 overrides the file's phi_g 35" in out and "--n 500" in out
     main(["params", "--out", str(f)])                 # an existing file is replaced
 
 
@@ -41,11 +41,40 @@ def test_files_of_the_format_before_units_still_load(tmp_path):
     assert load_params(old) == DemParams(n=500)
     gallery = (Path(__file__).parents[2] / "docs" / "gallery" / "calibration" / "before_issue27"
                / "calibrated.json")
-    assert load_params(gallery) == DemParams(n=2000, kn_over_d=8.723e9, friction_deg=15.0,
+    assert load_params(gallery) == DemParams(n=2000, kn_over_d=8.723e9, phi_g=15.0,
                                              rolling_friction=0.2)   # written before units
 
 
-BIAXIAL = ["biaxial", "--n", "100", "--seed", "3", "--rate", "0.5", "--eps-max", "0.004",
+def test_files_with_the_friction_key_before_phi_g_still_load(tmp_path, capsys):
+    """DemParams.friction_deg became phi_g (issue 32, one name with the H-model and the option
+    --phi-g): a parameter file, a state and a run's summary of before load under the new key."""
+    from dem import io
+    from dem.params import migrate
+    d = DemParams(n=300, phi_g=25.0).to_dict()
+    old = {("friction_deg" if k == "phi_g" else k): v for k, v in d.items()}
+    units = {("friction_deg" if k == "phi_g" else k): v for k, v in UNITS.items()}
+    f = tmp_path / "old_units.json"
+    f.write_text(json.dumps({"model": "dem", **old, "units": units, "note": "python -m dem params"}))
+    assert load_params(f) == DemParams(n=300, phi_g=25.0)
+    (tmp_path / "old_plain.json").write_text(json.dumps(old))
+    assert load_params(tmp_path / "old_plain.json") == DemParams(n=300, phi_g=25.0)
+    assert DemParams.from_dict(old) == DemParams(n=300, phi_g=25.0)     # states, summaries
+    for gallery in ("burst/dem/params.json", "calibration/params.json"):   # written before
+        text = (Path(__file__).parents[2] / "docs" / "gallery" / gallery).read_text()
+        assert '"friction_deg"' in text
+        assert load_params(Path(__file__).parents[2] / "docs" / "gallery" / gallery).phi_g > 0
+    both = {**old, "phi_g": 30.0}           # both keys: not silently one of them
+    (tmp_path / "both.json").write_text(json.dumps(both))
+    with pytest.raises(ValueError, match="unknown key 'friction_deg'"):
+        load_params(tmp_path / "both.json")
+    assert migrate(both) == both
+    from dem.__main__ import main
+    main(["params", "--params", str(f), "--out", str(tmp_path / "new.json")])
+    new = json.loads((tmp_path / "new.json").read_text())
+    assert new["phi_g"] == 25.0 and "friction_deg" not in new and new["units"]["phi_g"] == "deg"
+
+
+BIAXIAL = ["biaxial", "--n", "100", "--seed", "3", "--rate", "0.5", "--eps1-max", "0.004",
            "--no-vtk", "--save-fractions", "1", "--threads", "1"]
 
 
@@ -68,18 +97,18 @@ def test_file_run_equals_the_default_run_and_repeats_from_its_folder(tmp_path, c
     assert _biaxial_rows(tmp_path / "c", capsys, "--params",
                          str(tmp_path / "a" / "params.json")) == default
     d = json.loads(p.read_text())
-    d["friction_deg"] = 25
+    d["phi_g"] = 25
     p.write_text(json.dumps(d))
     assert _biaxial_rows(tmp_path / "d", capsys, "--params", str(p)) != default
     rec = json.loads((tmp_path / "d" / "params.json").read_text())
-    assert rec["friction_deg"] == 25.0 and "--n 100 overrides the file's n 12000" in rec["note"]
+    assert rec["phi_g"] == 25.0 and "--n 100 overrides the file's n 12000" in rec["note"]
 
 
 def test_bad_params_files_are_one_line_errors(tmp_path, capsys):
     d = DemParams().to_dict()
     cases = {"typo.json": ({**d, "kn_typo": 1.0}, "'kn_typo'"),
              "missing.json": ({k: v for k, v in d.items() if k != "seed"}, "'seed'"),
-             "range.json": ({**d, "friction_deg": 95.0}, "friction_deg"),
+             "range.json": ({**d, "phi_g": 95.0}, "phi_g"),
              "type.json": ({**d, "n": "12000"}, "n = \"12000\""),
              "float_n.json": ({**d, "n": 12000.0}, "allowed an integer"),
              "unit.json": ({**d, "units": {"density": "g/cm^3"}}, "units.density"),
@@ -104,10 +133,10 @@ def test_a_state_refuses_parameters_that_are_not_its_own(small_sample, tmp_path,
     own = tmp_path / "own.json"
     save_params(own, small_sample.params)
     other = tmp_path / "other.json"
-    save_params(other, small_sample.params.replace(friction_deg=20.0))
+    save_params(other, small_sample.params.replace(phi_g=20.0))
     code, err = _run(["probes", "--state", str(tmp_path / "s.npz"), "--params", str(other),
                       "--out", str(tmp_path / "p")], capsys)
-    assert code == 2 and len(err) == 1 and "friction_deg" in err[0], err
+    assert code == 2 and len(err) == 1 and "phi_g" in err[0], err
     assert not (tmp_path / "p").exists()
     from dem.__main__ import _check_state_params
     import argparse
@@ -129,3 +158,16 @@ def test_crosscheck_takes_an_hmodel_file(tmp_path, capsys):
     assert code == 2 and len(err) == 1 and "--hmodel-params" in err[0], err
     assert 'model = "dem": allowed "hmodel"' in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_fingerprints_are_those_of_before_phi_g():
+    """A state's fingerprint (what --resume of probes, domain and burst checks) hashes the
+    parameters under their keys of before the renaming (friction_deg): a sweep started before
+    it resumes. The hash below is the one the code before issue 32 gives this state."""
+    from dem.probes import state_fingerprint
+    from dem.sample import generate
+    from dem.simulation import Simulation
+    p = DemParams(n=50, seed=3)
+    x, r, walls = generate(p)
+    assert state_fingerprint(Simulation.new(p, x, r, walls).state()) == \
+        "e53561b30c195531309818126af0880d18de2ac34be3f74e1d8399866fc34ec0"

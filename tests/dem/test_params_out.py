@@ -16,8 +16,8 @@ def _main(argv, capsys):
 def test_params_rewrites_its_file(tmp_path, capsys):
     f = tmp_path / "p.json"
     assert _main(["params", "--out", str(f)], capsys)[0] == 0
-    assert _main(["params", "--friction", "30", "--out", str(f)], capsys)[0] == 0
-    assert load_params(f) == DemParams(friction_deg=30.0)
+    assert _main(["params", "--phi-g", "30", "--out", str(f)], capsys)[0] == 0
+    assert load_params(f) == DemParams(phi_g=30.0)
 
 
 def test_params_refuses_a_folder(tmp_path, capsys):

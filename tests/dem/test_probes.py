@@ -62,7 +62,7 @@ def test_cli_biaxial_and_probes(tmp_path):
     from dem.__main__ import main
     out = tmp_path / "bx"
     main(["biaxial", "--n", "150", "--seed", "2", "--out", str(out), "--rate", "0.1",
-          "--eps-max", "0.01", "--eta-a", "0.3", "--no-vtk"])
+          "--eps1-max", "0.01", "--eta-a", "0.3", "--no-vtk"])
     with open(out / "biaxial.csv") as f:
         rows = list(csv.DictReader(f))
     for col in ("eps1", "eps2", "eps_v", "s1", "s2", "p", "q", "eta"):

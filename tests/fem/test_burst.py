@@ -185,7 +185,7 @@ def test_outputs(burst_run, rule_dc):
     (["--density", "-1600"], ["--density", "> 0"]),
     (["--steps-per-period", "9"], ["--steps-per-period", ">= 10"]),
     (["--damping-ratio", "1"], ["--damping-ratio"]),
-    (["--start-fractions", "1.0"], ["--start-fractions", "0 < value < 1"]),
+    (["--start-fractions", "1.0"], ["--start-fractions", "0 < f < 1"]),
     (["--path-strain", "0"], ["--path-strain"]),
     (["--path-d-eps1", "0.02", "--path-strain", "0.01"], ["--path-d-eps1"]),
     (["--sigma2", "-1"], ["--sigma2"]),

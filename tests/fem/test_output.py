@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fem.output import CURVE_COLUMNS, MODE_FIELDS, read_curve
+from tests._interrupt import HANG_S
 
 
 def test_csv(homogeneous_run):

@@ -28,7 +28,7 @@ def test_biaxial_cli(tmp_path, capsys):
 
 def test_probes_cli(tmp_path):
     out = tmp_path / "p"
-    assert main(["probes", "--n-dir", "36", "--n", "72", "--d-eps1", "1e-4", "--stress-step", "30",
+    assert main(["probes", "--n-dir", "36", "--n-probes", "72", "--d-eps1", "1e-4", "--stress-step", "30",
                  "--out", str(out)]) == 0
     c = read_csv(out / "probes.csv")
     for k in ("alpha_eps", "alpha_sigma", "w2", "w2_sigma", "w2_V", "w2_g", "w2_micro", "w2n", "w2t", "plastic"):
@@ -44,7 +44,7 @@ def test_probes_cli(tmp_path):
 
 def test_domain_cli(tmp_path):
     out = tmp_path / "d"
-    assert main(["domain", "--sigma2", "100e3,300e3", "--n-dir", "36", "--n", "72", "--d-eps1", "1e-4",
+    assert main(["domain", "--sigma2", "100e3,300e3", "--n-dir", "36", "--n-probes", "72", "--d-eps1", "1e-4",
                  "--workers", "2", "--out", str(out)]) == 0
     c = read_csv(out / "domain.csv")
     assert list(c["sigma2"]) == [100e3, 300e3]

@@ -263,8 +263,8 @@ def test_fit_cli_writes_every_output(tmp_path, table_i_noisy, capsys):
             "--d-eps1", "1e-4", "--d-eps1-search", "1e-4", "--quiet"]
     assert cli.main(argv) == 0
     files = sorted(os.listdir(out))
-    assert files == ["correlation.json", "fig_fit.png", "fit.csv", "params.json", "residuals.csv",
-                     "summary.json"]
+    assert files == ["command.json", "correlation.json", "fig_fit.png", "fit.csv", "params.json",
+                     "residuals.csv", "summary.json"]
     from hmodel.params import load_params
     P = load_params(out / "params.json")
     assert P.n_dir == N_DIR and P.p0 == 200e3
@@ -291,7 +291,7 @@ def test_fit_cli_not_fittable(tmp_path, capsys):
     write_csv(tmp_path / "line.csv", {"eps1": e1, "q": 60e6 * e1, "s2": np.full(40, 2e5)})
     out = tmp_path / "o"
     assert cli.main(["fit", "--data", str(tmp_path / "line.csv"), "--out", str(out), "--quiet"]) == 1
-    assert sorted(os.listdir(out)) == ["fig_fit.png", "summary.json"]
+    assert sorted(os.listdir(out)) == ["command.json", "fig_fit.png", "summary.json"]
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "not fittable" and s["params"] is None and "straight line" in s["reason"]
     err = capsys.readouterr().err.strip().splitlines()
@@ -328,8 +328,8 @@ def _bad_curves(tmp):
 
 
 @pytest.mark.parametrize("data,extra,needles", [
-    ("missing", [], ["--data", "cannot read"]),
-    ("noq", [], ["--data", "columns", "eps1 and q"]),
+    ("missing", [], ["--data", "no such file", "a CSV file with a header row naming eps1 and q"]),
+    ("noq", [], ["--data", "no column q", "eps1 and q"]),
     ("nan", [], ["--data", "column q", "row 8", "finite"]),
     ("short", [], ["--data", "10 points", "at least 20"]),
     ("decreasing", [], ["--data", "eps1 does not increase"]),
@@ -345,11 +345,12 @@ def _bad_curves(tmp):
     ("good", ["--bounds", "r_g=1e-4:1e-2"], ["--bounds", "r_g", "not free"]),
     ("good", ["--bounds", "kn=1e5"], ["--bounds", "NAME=LOWER:UPPER"]),
     ("good", ["--free", "r_g", "--thickness", "0.002"], ["--free", "does not enter"]),
-    ("good", ["--d-eps1-search", "0.1"], ["--d-eps1-search", "0.03"]),
-    ("good", ["--d-eps1", "0.1"], ["--d-eps1", "0.03"]),
+    ("good", ["--d-eps1-search", "0.04"], ["--d-eps1-search", "0.03"]),
+    ("good", ["--d-eps1", "0.04"], ["--d-eps1", "0.03"]),
+    ("good", ["--d-eps1", "0.1"], ["--d-eps1", "0 < value < 0.05"]),
     ("good", ["--starts", "0"], ["--starts", ">= 1"]),
     ("good", ["--w-epsv", "-1"], ["--w-epsv", ">= 0"]),
-    ("good", ["--sigma2", "-5"], ["--sigma2", "> 0"]),
+    ("good", ["--sigma2", "-5"], ["--sigma2", "0 < value"]),
 ])
 def test_fit_cli_bad_input(tmp_path, capsys, no_fit, data, extra, needles):
     path = _bad_curves(tmp_path)

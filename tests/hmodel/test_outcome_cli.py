@@ -64,20 +64,21 @@ def test_newton_failure_with_a_state_is_exit_1_with_the_rows(tmp_path, capsys, m
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_interrupted_biaxial_keeps_every_row(tmp_path, sig, code):
     out = tmp_path / "b"
-    # the signal goes at the first progress line (steps done: "drained biaxial: [...] 250/..."),
-    # in a run of 900,000 steps that no machine finishes in between
-    rc, err = interrupt_after(["hmodel", "biaxial", "--n-dir", "8", "--eps1-max", "0.9",
+    # the signal goes at the first progress line (stderr is a pipe: plain lines, the first at a
+    # tenth of the path, "drained biaxial: 45000/450000 steps (10 %), ..."), in a run of 450,000
+    # steps that no machine finishes in between
+    rc, err = interrupt_after(["hmodel", "biaxial", "--n-dir", "8", "--eps1-max", "0.45",
                                "--d-eps1", "1e-6", "--out", str(out)],
-                              "drained biaxial: [", sig=sig)
+                              "drained biaxial: ", sig=sig)
     assert rc == code and "biaxial.csv" in err[-1]
     c = read_csv(out / "biaxial.csv")
     n = len(c["eps1"])
-    assert 250 < n < 900_000 and np.allclose(c["eps1"], 1e-6 * np.arange(n), rtol=1e-9, atol=1e-15)
+    assert 45_000 < n < 450_000 and np.allclose(c["eps1"], 1e-6 * np.arange(n), rtol=1e-9, atol=1e-15)
 
 
 def test_domain_names_a_path_that_ends(tmp_path, capsys):
     out = tmp_path / "d"
-    assert cli.main(["domain", "--sigma2", "200e3", *JUMP, "--n-dir", "36", "--n", "36",
+    assert cli.main(["domain", "--sigma2", "200e3", *JUMP, "--n-dir", "36", "--n-probes", "36",
                      "--d-eps1", "1e-5", "--workers", "1", "--out", str(out)]) == 0
     c = read_csv(out / "domain.csv")
     assert list(c) == ["sigma2", "p_w2", "q_w2", "p_w2sigma", "q_w2sigma", "p_peak", "q_peak",
@@ -106,8 +107,8 @@ def test_probes_mark_stress_directions_without_solution(tmp_path, monkeypatch):
     monkeypatch.setattr(cli, "stress_probes", some_none)
     monkeypatch.setattr(cli.plots, "fig_polar_w2", fig)
     out = tmp_path / "p"
-    assert cli.main(["probes", "--n-dir", "16", "--n", "16", "--d-eps1", "2e-4", "--stress-step", "30",
-                     "--eta", "0.9", "--out", str(out)]) == 0
+    assert cli.main(["probes", "--n-dir", "16", "--n-probes", "16", "--d-eps1", "2e-4", "--stress-step", "30",
+                     "--eta-a", "0.9", "--out", str(out)]) == 0
     assert np.array_equal(seen["none"], np.arange(0.0, 360.0, 30.0)[::3])
     assert (out / "fig8_polar_w2.png").stat().st_size > 10_000
     assert json.loads((out / "summary.json").read_text())["stress_probes_without_solution"] == 4
@@ -115,7 +116,7 @@ def test_probes_mark_stress_directions_without_solution(tmp_path, monkeypatch):
 
 def test_probes_before_a_path_that_ends(tmp_path, capsys):
     """Point A beyond the end of the drained path: one line naming --eta's reach and why."""
-    assert cli.main(["probes", *JUMP, "--n-dir", "36", "--eta", "1.0", "--out", str(tmp_path / "p")]) == 2
+    assert cli.main(["probes", *JUMP, "--n-dir", "36", "--eta-a", "1.0", "--out", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err
     assert "eta = 1.0 is never reached" in err and "the path ends discontinuous" in err
 
@@ -172,7 +173,7 @@ def test_burst_hold_cuts_a_time_step_and_ends_a_failure_that_cannot_converge(mon
 def test_interrupted_domain_keeps_the_pressures_finished(tmp_path):
     out = tmp_path / "d"
     rc, err = interrupt_after(["hmodel", "domain", "--sigma2", "100e3,200e3,300e3,400e3,500e3,600e3",
-                               "--n-dir", "36", "--n", "36", "--d-eps1", "1e-6", "--workers", "1",
+                               "--n-dir", "36", "--n-probes", "36", "--d-eps1", "1e-6", "--workers", "1",
                                "--out", str(out)], "domain: sigma2 = 100000 Pa done", sig=signal.SIGINT)
     assert rc == 130 and "domain.csv (" in err[-1]
     c = read_csv(out / "domain.csv")

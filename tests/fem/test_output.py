@@ -131,7 +131,6 @@ import numpy as np
 sys.path.insert(0, {str(__import__('pathlib').Path(__file__).parents[2])!r})
 from tests.fem.test_output import _fields, _mesh
 from fem.output import FieldWriter
-from tests._interrupt import HANG_S
 w = FieldWriter({str(tmp_path / 'f.xdmf')!r}, *_mesh(), xml_every=0.0)
 for k in range(2):
     w.write(0.1 * k, *_fields(k=k))

@@ -343,19 +343,21 @@ def burst_eq1_figure(out, fem_history, dem_history, name="fig_burst_eq1.png") ->
                 (-dm["w2_int"], r"$-W_2^{int}$", "C3", 1.4),
                 (dm["w_damp"], r"$W_{damp}$ (Cundall damping)", "C2", 1.4),
                 (dm["u0"], r"$U_0$", "C4", 1.0)])]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), constrained_layout=True)
+    from hmodel.plots import symlog_axis
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.0), layout="constrained")
     for ax, (title, t, terms) in zip(axes, panels):
         for y, lab, col, lw in terms:
             ax.plot(t, y, "-", color=col, lw=lw, label=lab)
         big = max(float(np.max(np.abs(y))) for y, *_ in terms)
-        ax.set_yscale("symlog", linthresh=max(1e-4 * big, 1e-15))
+        symlog_axis(ax, max(1e-4 * big, 1e-15))         # no tick labels piled at 0
         ax.axhline(0, color="0.5", lw=0.6)
         ax.set_xlabel("time since the switch [s]")
         ax.set_ylabel("energy since the switch [J/m]" if "FE" in title else
                       "energy since the switch [J]")
         ax.set_title(f"past the c peak - {title}", fontsize=9)
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3,
+                  frameon=False)                                   # below the panel, off the data
     save_figure(fig, os.path.join(out, name))
     return name
 

@@ -211,7 +211,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     if figures:
-        plot_biaxial(rows, info.get("A"), out_dir)
+        plot_biaxial(rows, info.get("A"), out_dir, n=sim.n, sigma2=confining, rate=rate)
     if os.path.exists(ck_path):
         os.unlink(ck_path)
     if os.path.isdir(cdir):
@@ -246,28 +246,48 @@ def _save_path_states(out_dir, cdir, cands, first, eta_max, fractions, etas):
     return [dict(zip(STATE_COLUMNS, r)) for r in listed]
 
 
-def plot_biaxial(rows, a_row, out_dir):
-    """Figs. 13 (q vs eps1) and 14 (eps_v vs eps1) as PNG, point A marked."""
+def plot_biaxial(rows, a_row, out_dir, n=None, sigma2=None, rate=None):
+    """Figs. 13 (q vs eps1) and 14 (eps_v vs eps1) as PNG, point A marked and labelled off the
+    curve (``hmodel.plots.label_point``); the title names the sample (``n`` disks), the
+    confining stress ``sigma2`` [Pa] and the axial strain rate ``rate`` [1/s] when given."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from hmodel.io import save_figure
+    from hmodel.plots import label_point
     arr = np.array([[r[2], r[4], r[8]] for r in rows])
-    for name, col, ylabel, scale in (("fig13_q.png", 2, "q = s1 - s2 [kPa]", 1e-3),
-                                     ("fig14_epsv.png", 1, "eps_v = eps1 + eps2 [%]", 100)):
+    run = ", ".join(x for x in (f"{n} disks" if n else "",
+                                f"$\\sigma_2$ = {sigma2 / 1e3:g} kPa" if sigma2 else "",
+                                f"rate {rate:g} /s" if rate else "") if x)
+    for name, col, ylabel, scale, what in (
+            ("fig13_q.png", 2, "q = s1 - s2 [kPa]", 1e-3, "deviatoric stress"),
+            ("fig14_epsv.png", 1, "eps_v = eps1 + eps2 [%]", 100, "volumetric strain")):
         fig, ax = plt.subplots(figsize=(5, 4))
         ax.plot(arr[:, 0] * 100, arr[:, col] * scale, "-k", lw=1)
-        if a_row is not None:
-            yv = a_row["q"] if col == 2 else a_row["eps_v"]
-            ax.plot([a_row["eps1"] * 100], [yv * scale], "o", color="C3")
-            ax.annotate("A", (a_row["eps1"] * 100, yv * scale), textcoords="offset points",
-                        xytext=(5, 5), color="C3")
         ax.set_xlabel("axial strain eps1 [%]")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
+        title = f"DEM drained biaxial test: {what}" + (f"\n{run}" if run else "")
         if col == 1:
-            ax.set_title("compression positive (eps_v < 0: dilation)", fontsize=8)
+            title += "\ncompression positive (eps_v < 0: dilation)"
+        ax.set_title(title, fontsize=8)
         fig.tight_layout()
-        tmp = os.path.join(out_dir, ".tmp-" + name)
-        fig.savefig(tmp, dpi=120, format="png")
-        plt.close(fig)
-        os.replace(tmp, os.path.join(out_dir, name))
+        if a_row is not None:
+            yv = a_row["q"] if col == 2 else a_row["eps_v"]
+            ax.plot([a_row["eps1"] * 100], [yv * scale], "o", color="C3")
+            label_point(ax, a_row["eps1"] * 100, yv * scale, "A", color="C3")
+        save_figure(fig, os.path.join(out_dir, name), dpi=120)
+
+
+def redraw_figures(out_dir, summary="summary.json"):
+    """Figs. 13 and 14 of a finished ``dem biaxial`` folder drawn again from its biaxial.csv and
+    ``summary`` (point A, n, sigma2, rate), without a run: ``python -c "from dem.experiment
+    import redraw_figures; redraw_figures('DIR')"``."""
+    from . import io
+    header, recs = io.read_csv(os.path.join(out_dir, "biaxial.csv"))
+    rows = [[r[c] for c in header] for r in recs]
+    with open(os.path.join(out_dir, summary)) as f:
+        s = json.load(f)
+    plot_biaxial(rows, s.get("A"), out_dir, n=s.get("n"), sigma2=s.get("confining"),
+                 rate=s.get("rate"))

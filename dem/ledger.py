@@ -226,15 +226,17 @@ def plot_ledger(path, panels):
     """One PNG of Eq. 1's terms against the time since the start, one panel per (title, rows,
     columns) in ``panels`` (a run's history: ``rows`` with ``columns`` names, which must hold
     the ledger's ``t_ledger``, ``dke``, ``w2_ext``, ``w2_int``, ``w_damp``, ``u0``). Symmetric
-    log axis: the terms span decades. The sum W2_ext - W2_int + W_damp + U0 is drawn dotted on
-    E_c - E_c(0) (Eq. 1: they coincide)."""
+    log axis (the terms span decades; ``hmodel.plots.symlog_axis``: no tick labels piled at 0).
+    The sum W2_ext - W2_int + W_damp + U0 is drawn dotted on E_c - E_c(0) (Eq. 1: they
+    coincide). One legend below the panels (the terms are the same in each), off the curves."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from hmodel.io import save_figure
-    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.4), squeeze=False,
-                             constrained_layout=True)
+    from hmodel.plots import symlog_axis
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 5.0), squeeze=False,
+                             layout="constrained")
     for ax, (title, rows, columns) in zip(axes[0], panels):
         h = np.asarray(rows, float)
         col = {c: k for k, c in enumerate(columns)}
@@ -250,12 +252,41 @@ def plot_ledger(path, panels):
         total = h[:, col["w2_ext"]] - h[:, col["w2_int"]] + h[:, col["w_damp"]] + h[:, col["u0"]]
         ax.plot(t, total, ":", color="y", lw=1.2,
                 label=r"$W_2^{ext} - W_2^{int} + W_{damp} + U_0$ (Eq. 1)")
-        big = max(float(np.max(np.abs(y))) for y, *_ in terms)
-        ax.set_yscale("symlog", linthresh=max(big * 1e-4, 1e-12))
+        big = max([float(np.nanmax(np.abs(y))) for y, *_ in terms if np.isfinite(y).any()] + [0.0])
+        symlog_axis(ax, max(big * 1e-4, 1e-12))
         ax.axhline(0, color="0.5", lw=0.6)
         ax.set_xlabel("time since the start [s]")
         ax.set_ylabel("energy since the start [J]")
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=7, loc="best")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=8, frameon=False)
     save_figure(fig, path, dpi=120)
+
+
+def redraw_burst_ledger(out_dir):
+    """fig_burst_ledger.png of a finished ``dem burst`` folder drawn again from its history.csv,
+    burst.csv and summary.json, as the run draws it (Eq. 1's terms of the first path's below and
+    past runs), without a run: ``python -c "from dem.ledger import redraw_burst_ledger;
+    redraw_burst_ledger('DIR')"``."""
+    import csv
+    import json
+    import os
+    with open(os.path.join(out_dir, "summary.json")) as f:
+        n = json.load(f)["n_disks"]
+    with open(os.path.join(out_dir, "burst.csv"), newline="") as f:
+        runs = list(csv.DictReader(f))
+    with open(os.path.join(out_dir, "history.csv"), newline="") as f:
+        hist = list(csv.DictReader(f))
+    first = (runs[0]["ratio"], runs[0]["start_fraction"])
+    columns = [c for c in hist[0] if c not in ("ratio", "start_fraction", "switch")]
+    panels = []
+    for r in runs:
+        if (r["ratio"], r["start_fraction"]) != first:
+            continue
+        rows = [[float(x[c]) for c in columns] for x in hist
+                if x["switch"] == r["switch"] and (x["ratio"], x["start_fraction"]) == first]
+        panels.append((f"R = {float(r['ratio']):g}, f = {float(r['start_fraction']):g}, "
+                       f"{r['switch']}: {r['outcome']} ({n} disks)", rows, columns))
+    if panels:
+        plot_ledger(os.path.join(out_dir, "fig_burst_ledger.png"), panels)

@@ -537,7 +537,9 @@ def write_probe_files(rows, out_dir, note=""):
 def plot_probe_ledger(rows, path, note=""):
     """Eq. 1's terms against time (``dem.ledger.plot_ledger``) of two probes: the settled one
     of the smallest W2 (the nearest to the boundary) and the failure of the largest backbone
-    kinetic energy; one panel when only one kind is there, none without a ledger."""
+    kinetic energy; one panel when only one kind is there, none without a ledger. The title
+    quotes the settled probe's W2 as normalized (W2 / (|d sigma| |d eps|), Eq. 15, [-]): the
+    axis below it is in J; ``note`` goes on a second line."""
     from .ledger import plot_ledger
     k = HISTORY_COLUMNS.index("eq1_bookkeeping")
     led = [r for r in rows if r["history"] and len(r["history"][0]) > k
@@ -547,14 +549,14 @@ def plot_probe_ledger(rows, path, note=""):
     panels = []
     if eq:
         r = min(eq, key=lambda r: r["w2"])
-        panels.append((f"settled probe {r['alpha_sigma']:g} deg (W2 = {r['w2']:.3f})",
-                       r["history"], HISTORY_COLUMNS))
+        panels.append((f"settled probe {r['alpha_sigma']:g} deg, normalized W2 = {r['w2']:.3f} "
+                       "[-]", r["history"], HISTORY_COLUMNS))
     if fail:
         r = max(fail, key=lambda r: r["ke_peak"])
         panels.append((f"failed probe {r['alpha_sigma']:g} deg (runaway)", r["history"],
                        HISTORY_COLUMNS))
     if panels:
-        plot_ledger(path, [(f"{t}{' - ' + note if note else ''}", h, c) for t, h, c in panels])
+        plot_ledger(path, [(t + ("\n" + note if note else ""), h, c) for t, h, c in panels])
 
 
 RMAX = 2.0   # polar radius of the outer ring: 0.5 + W2 is drawn in [0, RMAX]

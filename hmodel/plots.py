@@ -6,10 +6,13 @@ horizontal and d sigma1 on the vertical axis; the dashed circle of radius 0.5 is
 """
 from __future__ import annotations
 
+import math
+
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .io import save_figure  # noqa: E402
@@ -17,7 +20,8 @@ from .io import save_figure  # noqa: E402
 __all__ = ["fig_q_eps1", "fig_epsv_eps1", "fig_probes", "fig_stress_components", "fig_polar_w2",
            "fig_w2_split", "fig_domain", "fig_w2_normal_tangential", "polar_axes", "mark_cone",
            "mark_plastic", "cone_zoom", "cone_of", "needs_zoom", "polar_series",
-           "fig_burst_paths", "fig_burst_ke", "fig_burst_residual", "END_MARK"]
+           "fig_burst_paths", "fig_burst_ke", "fig_burst_residual", "END_MARK", "symlog_axis",
+           "log_axis", "label_point", "SpacedLocator"]
 
 
 def _mark(ax, x, y, label="A", marker="o", color="C3", offset=(6, -12)):
@@ -551,3 +555,99 @@ def fig_burst_residual(histories, path, bound=1e-6, title="Energy balances of ea
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     save_figure(fig, path)
+
+
+# -- axes that read: a symlog axis without labels piled at zero, log axes with several labels,
+# a point's label beside its curve --------------------------------------------------------------
+class SpacedLocator(matplotlib.ticker.Locator):
+    """The ticks of ``base`` less those whose labels would overlap on screen: 0 is kept first,
+    then the ticks farthest from 0, each only if it is at least ``gap`` label heights from every
+    tick kept (a symlog axis's +-linthresh labels sit half a decade from 0 and pile up on its
+    label otherwise). Decided at every draw from the axis's height in pixels, so a layout
+    change cannot bring an overlap back. Vertical axes only (the labels' heights)."""
+
+    def __init__(self, base, gap=1.6):
+        self.base = base
+        self.gap = gap
+
+    def set_axis(self, axis):
+        super().set_axis(axis)
+        self.base.set_axis(axis)
+
+    def tick_values(self, vmin, vmax):
+        return self.base.tick_values(vmin, vmax)
+
+    def __call__(self):
+        ticks = np.asarray(self.base(), float)
+        axis = self.axis
+        if axis is None or axis.axis_name != "y" or ticks.size < 2:
+            return ticks
+        lo, hi = sorted(axis.get_view_interval())
+        ticks = ticks[(ticks >= lo) & (ticks <= hi)]
+        tr = axis.get_transform()
+        s_lo, s_hi = tr.transform([lo, hi])
+        height = axis.axes.bbox.height
+        if not (height > 0 and s_hi > s_lo):
+            return ticks
+        px = (tr.transform(ticks) - s_lo) / (s_hi - s_lo) * height
+        size = axis.get_major_ticks(1)[0].label1.get_size()          # [pt]
+        need = self.gap * size * axis.axes.figure.dpi / 72.0
+        order = sorted(range(len(ticks)), key=lambda k: (ticks[k] != 0, -abs(ticks[k])))
+        kept = []
+        for k in order:
+            if all(abs(px[k] - px[j]) >= need for j in kept):
+                kept.append(k)
+        return np.sort(ticks[kept])
+
+
+def symlog_axis(ax, linthresh):
+    """A symmetric log y axis (linear within +-``linthresh``) whose tick labels never overlap
+    (``SpacedLocator``), the minor ticks unlabelled."""
+    from matplotlib.ticker import NullFormatter
+    ax.set_yscale("symlog", linthresh=linthresh)
+    ax.yaxis.set_major_locator(SpacedLocator(ax.yaxis.get_major_locator()))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
+def _short_sci(v, _pos=None):
+    """2e9, 5e9, 1e10: a log axis's labels at 1, 2 and 5 of each decade."""
+    if not (v > 0 and math.isfinite(v)):
+        return ""
+    e = math.floor(math.log10(v) + 1e-9)
+    m = v / 10.0 ** e
+    return f"{m:.0f}e{e}" if abs(m - round(m)) < 1e-6 else f"{v:.2g}"
+
+
+def log_axis(ax, which="x"):
+    """A log axis labelled at 1, 2 and 5 of every decade ("2e9", "5e9", "1e10"), so a range of
+    about one decade gets several labels rather than the one of its decade."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    (ax.set_xscale if which == "x" else ax.set_yscale)("log")
+    axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    axis.set_major_formatter(FuncFormatter(_short_sci))
+    axis.set_minor_formatter(NullFormatter())
+
+
+LABEL_OFFSETS = ((8, -16), (8, 6), (-16, 6), (-16, -16), (10, -5), (-20, -5), (-4, 10),
+                 (-4, -20), (14, -28), (14, 16))     # [points] from the point, in this order
+
+
+def label_point(ax, x, y, text, color="C3", offsets=LABEL_OFFSETS, **kw):
+    """Write ``text`` beside the point (x, y) of ``ax`` where it crosses none of the axes'
+    lines: the first of ``offsets`` whose text box no line passes through (the first offset if
+    every one is crossed). Call it once the layout is final (after ``tight_layout``); returns
+    the annotation."""
+    from matplotlib.transforms import Bbox
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    paths = [ln.get_transform().transform_path(ln.get_path()) for ln in ax.get_lines()
+             if ln.get_visible() and len(ln.get_xdata()) > 1 and ln.get_linestyle() != "None"]
+    for off in offsets:
+        t = ax.annotate(text, (x, y), textcoords="offset points", xytext=off, color=color, **kw)
+        box = Bbox(t.get_window_extent(renderer).get_points()).expanded(1.15, 1.15)
+        if not any(p.intersects_bbox(box, filled=False) for p in paths):
+            return t
+        t.remove()
+    return ax.annotate(text, (x, y), textcoords="offset points", xytext=offsets[0], color=color,
+                       **kw)

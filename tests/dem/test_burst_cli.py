@@ -42,8 +42,10 @@ def _run(argv, capsys):
     return e.value.code, capsys.readouterr().err.strip().splitlines()
 
 
-def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
+def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys, monkeypatch):
     from dem.__main__ import main
+    from tests import _figures as F
+    caught = F.catch(monkeypatch)
     out = tmp_path / "burst"
     main(["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
           "--threads", "1", "--max-steps", "200000"])
@@ -145,6 +147,23 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys):
     # only the states the switches started from are kept
     assert sorted(p.name for p in (out / "rest").iterdir()) == sorted(
         f"R-2_f0.9_{r['switch']}.npz" for r in runs)
+    # the figures say what their titles say (issue 32, tests/_figures.py): the strain figure's
+    # line styles as its title gives them; the ledger's symlog axes without labels piled at 0,
+    # its legend drawn and off the curves; the anatomy's arrows clipped to their own panel
+    fig = caught["fig_burst_strain.png"]
+    (ax,) = fig.axes
+    assert "solid: below, dashed: past" in ax.get_title() and "lateral strain (dotted)" in ax.get_title()
+    assert F.line_styles(ax, "below", "axial") == {"-"}
+    assert F.line_styles(ax, "past", "axial") == {"--"}
+    assert F.line_styles(ax, "lateral") == {":"}
+    assert F.overlapping_texts(fig) == [] and F.undrawn_legend_entries(fig) == []
+    F.assert_readable(caught["fig_burst_ledger.png"])
+    fig = caught["fig_burst_anatomy.png"]
+    assert F.overlapping_texts(fig) == []
+    for ax in fig.axes:
+        for q in ax.collections:
+            if type(q).__name__ == "Quiver":
+                assert q.get_clip_on() and q.get_clip_box() is ax.bbox
 
 
 def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, tmp_path,

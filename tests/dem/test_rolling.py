@@ -186,7 +186,8 @@ def _fingerprint_before_rolling(state):
     for a in (state.x, state.v, state.w, state.theta, state.r, state.walls, state.walls_ref,
               state.prev, state.x_ref, state.pi, state.pj, state.ft, state.ref_len):
         h.update(np.ascontiguousarray(a).tobytes())
-    pd = {k: v for k, v in state.params.to_dict().items()
+    # DemParams.to_dict() of that time: the grain friction angle under its name then
+    pd = {("friction_deg" if k == "phi_g" else k): v for k, v in state.params.to_dict().items()
           if k not in ("rolling_friction", "rolling_stiffness")}
     c = state.control      # its seven fields of that time (the tie's ratio came later)
     ctrl = [c.mode, c.s_from, c.s_to, c.ramp_start, c.ramp_len, c.rate, c.len0]

@@ -13,7 +13,7 @@
 The names below are those of the former single module ``fem/indicators.py``.
 """
 from .global_check import GlobalCheck, global_indicators, global_indicators_direct, global_w2
-from .linalg import det_sign, lam_min_sym, permutation_parity, symmetric_inertia
+from .linalg import det_sign, lam_min_sym, one_blas_thread, permutation_parity, symmetric_inertia
 from .local import fibonacci_sphere, local_indicators, mandel
 from .process import GlobalCheckProcess
 # The Numba kernels of the modules, named here too: ``fem.__main__._fem_kernels`` finds the

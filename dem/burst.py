@@ -421,15 +421,24 @@ def path_probe(state: State, ratio: float, opts: BurstOptions = BurstOptions(), 
                        before.steps + moves + after.steps, time.time() - t0, rate)
 
 
-def k_noise(probes, d_eps1) -> float:
-    """The noise of k_path [Pa] from the probes of one path: sqrt(2) times the RMS change of c
-    that relaxing an equilibrium at fixed strain makes (c_before - c_state, the states held
-    under the dead load: the relaxed states of the path are at rest at fixed strain already),
-    over d_eps1: c_before and c_after each carry that noise. NaN without such probes."""
+def k_noise(probes, d_eps1, repeats=()) -> tuple:
+    """The noise of k_path [Pa] from the probes of one path, (the larger of the two below, the
+    relaxations', the repeats'): (1) sqrt(2) times the RMS change of c that relaxing an
+    equilibrium at fixed strain makes (c_before - c_state, the states held under the dead load:
+    the relaxed states of the path are at rest at fixed strain already), over d_eps1: c_before
+    and c_after each carry it; (2) the scatter of k_path on one macroscopic state, from
+    ``repeats``, pairs of probes of the same state before and after it was held once more with no
+    change of load (the baselines' ends against the switches' starts): the RMS of their
+    differences over sqrt(2). The second is the larger where the packing's last hold changes its
+    response (2000 disks: 6.5e7 against 2.6e7 Pa at the below state, where the relaxations give
+    6.9e6 Pa). NaN where neither can be had."""
     dz = [p.c_before - p.c_state for p in probes if p.key.startswith("h")]
-    if not dz:
-        return math.nan
-    return math.sqrt(2.0) * math.sqrt(float(np.mean(np.square(dz)))) / d_eps1
+    relax_noise = (math.sqrt(2.0) * math.sqrt(float(np.mean(np.square(dz)))) / d_eps1
+                   if dz else math.nan)
+    dk = [a.k_path - b.k_path for a, b in repeats]
+    repeat_noise = (math.sqrt(float(np.mean(np.square(dk))) / 2.0) if dk else math.nan)
+    both = [x for x in (relax_noise, repeat_noise) if math.isfinite(x)]
+    return (max(both) if both else math.nan), relax_noise, repeat_noise
 
 
 CLEARLY = 2.0      # k_path is clearly positive above this many times its noise
@@ -444,12 +453,13 @@ def theory_verdict(eqs, fails, noise, dc) -> dict:
     [Pa])]; ``noise``: k_path's noise [Pa] (``k_noise``); ``dc``: the smallest step [Pa].
 
     k_path is *clearly positive* above ``CLEARLY`` times its noise. The crossing: the zero of
-    k_path, interpolated linearly in c between the last equilibrium where k_path is clearly
-    positive and the next (the band: where k_path = +-CLEARLY noise there; an equilibrium past
-    it whose k_path is positive but within the noise does not move it: at 4000 disks one such,
-    +1.8e6 Pa against a noise of 4.1e6 Pa, lies between two of -1.6e7 and -5.6e8 Pa); the
-    overshoot: how far past it, in c and in eps1, the dead load still held (the c peak at rest,
-    the last equilibrium). The verdict:
+    k_path, interpolated linearly in c between the first equilibrium with k_path <= 0 after the
+    last one where it is clearly positive, and the one before it (the band: where k_path = +-
+    CLEARLY noise there). A positive k_path within the noise after the crossing does not move it
+    (at 4000 disks one, +1.8e6 Pa against a noise of 4.1e6 Pa, lies between two of -1.6e7 and
+    -5.6e8 Pa), nor do positive ones within the noise before it (they are the rise's last
+    equilibria). The overshoot: how far past it, in c and in eps1, the dead load still held (the
+    c peak at rest, the last equilibrium). The verdict:
     "passes" when no hold of +dc failed from an equilibrium where k_path is clearly positive
     and k_path is not clearly positive at the last equilibrium; "contradicted" when a hold of +dc
     failed from an equilibrium where k_path is clearly positive; "no verdict" without a failing
@@ -477,10 +487,11 @@ def theory_verdict(eqs, fails, noise, dc) -> dict:
     against = [f for f in dc_fails if kk.get(f[0], (nan, False))[1]]
     out["finite_step_failures"] = sum(1 for f in fails if f[1] > dc * (1 + 1e-9)
                                       and kk.get(f[0], (nan, False))[1])
-    # the crossing: after the last equilibrium with k_path clearly positive (if one follows)
+    # the crossing: the first k_path <= 0 after the last clearly positive one (if one follows)
     above = np.flatnonzero(pos)
-    if len(above) and above[-1] < len(k) - 1:
-        a = int(above[-1])
+    after = np.flatnonzero(k[above[-1]:] <= 0) + above[-1] if len(above) else []
+    if len(above) and len(after):
+        a = int(after[0]) - 1
 
         def zero(level):
             return float(np.interp(level, [k[a + 1], k[a]], [c[a + 1], c[a]])), \
@@ -638,7 +649,10 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
                     f"(dc {pr.c_after - pr.c_before:+.1f} Pa over d eps1 {pr.d_eps1:.3g}), "
                     f"{pr.outcome}")
             probes[key] = pr
-        noise = k_noise(list(probes.values()), opts.probe_d_eps1)
+        repeats = [(probes[starts[i]], probes[f"h{i}_end"]) for i in baselines.values()
+                   if starts[i] in probes and f"h{i}_end" in probes]
+        noise, relax_noise, repeat_noise = k_noise(list(probes.values()), opts.probe_d_eps1,
+                                                   repeats)
         eqk = [(k, c, e, probes[k].k_path if probes[k].outcome == "equilibrium" else math.nan)
                for k, c, e in eq]
         fails = [(starts[i], ct - cf) for i, (ro, cf, ct, h) in enumerate(holds)
@@ -646,7 +660,8 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
         verdict = theory_verdict(eqk, fails, noise, dc) if end == "past found" else \
             {**theory_verdict(eqk, [], noise, dc), "why": f"the rest search ended: {end}"}
         st0 = journal.state("relaxed_start")
-        verdict.update(probe_d_eps1=opts.probe_d_eps1,
+        verdict.update(k_noise_relax=relax_noise, k_noise_repeat=repeat_noise,
+                       probe_d_eps1=opts.probe_d_eps1,
                        probe_rate=probe_rate_of(len(st0.r), st0.params.dt, opts))
         log(f"theory: {verdict['verdict']} ({verdict['why']})")
     return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds, c_peak,

@@ -32,14 +32,15 @@ def main(argv=None):
     ap.add_argument("--fraction", type=float, default=0.9)
     ap.add_argument("--rates", default="0.01,0.003,0.001,0.0003")
     ap.add_argument("--d-eps1", default="3e-6,1e-5,3e-5")
-    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--threads", type=int, default=None, help="default: dem.threads chooses")
+    ap.add_argument("--switches", default="below,past", help="the states probed")
     a = ap.parse_args(argv)
     rates = [float(x) for x in a.rates.split(",")]
     strains = [float(x) for x in a.d_eps1.split(",")]
     opts = BurstOptions()
     print(f"{'state':6s} {'rate':>7s} {'d_eps1':>8s} {'c_before':>10s} {'dc':>9s} "
           f"{'k_path':>10s} {'steps':>7s} {'wall':>6s}")
-    for sw in ("below", "past"):
+    for sw in a.switches.split(","):
         path = os.path.join(a.out, "rest", f"R{a.ratio:g}_f{a.fraction:g}_{sw}.npz")
         st, _ = io.load_state(path)
         t0 = time.time()

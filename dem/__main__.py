@@ -410,7 +410,9 @@ def build_parser() -> opt.Parser:
     add(g, "--stairs", 8, record=BO)
     add(g, "--max-holds", 40, record=BO)
     add(g, "--probe-d-eps1", 1e-5, record=BO)
-    add(g, "--probe-rate", 1e-3, record=BO)
+    add(g, "--probe-rate", None, record=BO,
+        default_text="the rate at which the probe's move lasts one equilibrium window "
+                     "(1.5e-4 at 2000 disks, 6.2e-5 at 12,000; docs/burst.md)")
     add(g, "--no-probes")
     add(g, "--max-steps", 1_000_000, record=BO, note="of a switched run")
     add(g, "--fail-strain", 0.01, record=BO)

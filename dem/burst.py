@@ -142,7 +142,8 @@ class BurstOptions(NamedTuple):
     max_holds: int = 40             # cap of the staircase's holds
     probes: bool = True             # the kinematic probe of the path at every equilibrium
     probe_d_eps1: float = 1e-5      # the probe's axial strain along the path [-]
-    probe_rate: float = 1e-3        # the probe's axial strain rate [1/s] (path_probe)
+    probe_rate: float | None = None  # the probe's axial strain rate [1/s]; None: the move lasts
+                                     # one equilibrium window (``probe_rate_of``)
 
     def validate(self, n_disks=None) -> "BurstOptions":
         """ValueError naming the option and its range for a bad value; ``n_disks``: the
@@ -161,13 +162,15 @@ class BurstOptions(NamedTuple):
                    "wall_period_steps >= 20 (the leapfrog resolves the walls' period)"),
                   ("stairs", self.stairs >= 1, "stairs >= 1"),
                   ("max_holds", self.max_holds >= 2, "max_holds >= 2"),
-                  ("probe_d_eps1", 0 < self.probe_d_eps1 <= 1e-3, "0 < probe_d_eps1 <= 1e-3"),
-                  ("probe_rate", 0 < self.probe_rate <= self.rate,
-                   "0 < probe_rate <= rate (the path's) [1/s]"))
+                  ("probe_d_eps1", 0 < self.probe_d_eps1 <= 1e-3, "0 < probe_d_eps1 <= 1e-3"))
         for name, ok, rng in checks:
             val = getattr(self, name)
             if not ok or not math.isfinite(val):
                 raise ValueError(f"{name}={val!r}; allowed range: {rng}")
+        if self.probe_rate is not None and not (math.isfinite(self.probe_rate)
+                                                and 0 < self.probe_rate <= self.rate):
+            raise ValueError(f"probe_rate={self.probe_rate!r}; allowed range: 0 < probe_rate <= "
+                             "rate (the path's) [1/s], or the rule (one equilibrium window)")
         if self.hold not in HOLDS:
             raise ValueError(f"hold={self.hold!r}; allowed: {', '.join(HOLDS)}")
         if self.wall_mass is not None and not (math.isfinite(self.wall_mass)
@@ -298,7 +301,7 @@ STAIR_COLUMNS = ["ratio", "start_fraction", "hold", "role", "c_from", "c_target"
                  "k_path", "ke_w2ext_max", "ke_end_over_bound"]
 # rest.csv's probe columns, and probes.csv's (every kinematic probe of the path: ``path_probe``)
 PROBE_COLUMNS = ["ratio", "start_fraction", "key", "c_state", "c_before", "c_after", "eps1_before",
-                 "d_eps1", "k_path", "w2", "outcome", "steps", "wall_time"]
+                 "d_eps1", "k_path", "w2", "outcome", "steps", "wall_time", "rate"]
 
 
 class RelaxResult(NamedTuple):
@@ -349,6 +352,21 @@ def relax(state: State, ratio: float, opts: BurstOptions = BurstOptions(), threa
                        res.history, time.time() - t0)
 
 
+def probe_rate_of(n_disks: int, dt: float, opts: BurstOptions) -> float:
+    """The probe's axial strain rate [1/s]: ``opts.probe_rate``, or by the rule the rate at which
+    the move of ``opts.probe_d_eps1`` lasts one equilibrium window (``dem.settle.window_steps``,
+    which grows as the sample's width: the time a disturbance takes to cross it and die out).
+    Measured (docs/gallery/burst/dem/README.md, dem12000/README.md): k_path converges as the rate
+    falls, and the rate it needs falls with the size: at 2000 disks 0.001/s and 0.0003/s agree
+    (+27.6 and +30.1 MPa at the below state), at 12,000 disks 0.001, 0.0003, 0.0001/s read -17.8,
+    +13.0, +22.9 MPa at the below state; the rule gives 1.5e-4/s at 2000 and 6.2e-5/s at 12,000
+    disks."""
+    if opts.probe_rate is not None:
+        return opts.probe_rate
+    from .settle import window_steps
+    return opts.probe_d_eps1 / (window_steps(n_disks, opts.rule()) * dt)
+
+
 class ProbeResult(NamedTuple):
     """A kinematic probe of the path at a state at rest (``path_probe``)."""
     key: str                  # the state probed (the staircase journal's key)
@@ -362,6 +380,7 @@ class ProbeResult(NamedTuple):
     outcome: str              # the two relaxations': "equilibrium" if both settled
     steps: int                # time steps: relaxation, move, relaxation
     wall_time: float          # [s]
+    rate: float = math.nan    # the move's axial strain rate [1/s] (``probe_rate_of``)
 
 
 def path_probe(state: State, ratio: float, opts: BurstOptions = BurstOptions(), threads=None,
@@ -370,7 +389,7 @@ def path_probe(state: State, ratio: float, opts: BurstOptions = BurstOptions(), 
     burst (``shared/spec/burst.md``, "What the DEM's burst proves"): ``state`` relaxed at fixed
     strain (``relax``: c_before, the c it keeps at rest; its change from the state's c is a
     sample of the noise of c at rest), the tied walls then moved along the path, d eps2 = R
-    d eps1, by ``opts.probe_d_eps1`` at the axial rate ``opts.probe_rate`` (strain control:
+    d eps1, by ``opts.probe_d_eps1`` at the axial rate ``probe_rate_of`` (strain control:
     always controllable, whatever the sign of the answer), and relaxed again at fixed strain
     (c_after). The static stiffness of the path is k_path = dc / d eps1 [Pa], dc = c_after -
     c_before, d eps1 the walls' own; along the path W2 = d eps1 (d s1 + R d s2) = dc d eps1 per
@@ -386,8 +405,9 @@ def path_probe(state: State, ratio: float, opts: BurstOptions = BurstOptions(), 
     if threads is not None:
         sim.threads = ThreadChooser(sim.n, threads)
     e0 = sim.strain()[1]
-    sim.set_control(strain_rate(ratio * opts.probe_rate, opts.probe_rate, sim.ref_len))
-    moves = max(1, int(round(opts.probe_d_eps1 / (opts.probe_rate * sim.dt))))
+    rate = probe_rate_of(sim.n, sim.dt, opts)
+    sim.set_control(strain_rate(ratio * rate, rate, sim.ref_len))
+    moves = max(1, int(round(opts.probe_d_eps1 / (rate * sim.dt))))
     sim.run(moves)
     after = relax(sim.state(), ratio, opts, threads)
     e1 = Simulation(after.state).strain()[1]
@@ -398,18 +418,27 @@ def path_probe(state: State, ratio: float, opts: BurstOptions = BurstOptions(), 
                else f"{before.outcome}/{after.outcome}")
     return ProbeResult(key, c_state, before.c_rest, after.c_rest, e0, d, dc / d,
                        dc * d * sim.ref_len[1] * w * sim.params.thickness, outcome,
-                       before.steps + moves + after.steps, time.time() - t0)
+                       before.steps + moves + after.steps, time.time() - t0, rate)
 
 
-def k_noise(probes, d_eps1) -> float:
-    """The noise of k_path [Pa] from the probes of one path: sqrt(2) times the RMS change of c
-    that relaxing an equilibrium at fixed strain makes (c_before - c_state, the states held
-    under the dead load: the relaxed states of the path are at rest at fixed strain already),
-    over d_eps1: c_before and c_after each carry that noise. NaN without such probes."""
+def k_noise(probes, d_eps1, repeats=()) -> tuple:
+    """The noise of k_path [Pa] from the probes of one path, (the larger of the two below, the
+    relaxations', the repeats'): (1) sqrt(2) times the RMS change of c that relaxing an
+    equilibrium at fixed strain makes (c_before - c_state, the states held under the dead load:
+    the relaxed states of the path are at rest at fixed strain already), over d_eps1: c_before
+    and c_after each carry it; (2) the scatter of k_path on one macroscopic state, from
+    ``repeats``, pairs of probes of the same state before and after it was held once more with no
+    change of load (the baselines' ends against the switches' starts): the RMS of their
+    differences over sqrt(2). The second is the larger where the packing's last hold changes its
+    response (2000 disks: 6.5e7 against 2.6e7 Pa at the below state, where the relaxations give
+    6.9e6 Pa). NaN where neither can be had."""
     dz = [p.c_before - p.c_state for p in probes if p.key.startswith("h")]
-    if not dz:
-        return math.nan
-    return math.sqrt(2.0) * math.sqrt(float(np.mean(np.square(dz)))) / d_eps1
+    relax_noise = (math.sqrt(2.0) * math.sqrt(float(np.mean(np.square(dz)))) / d_eps1
+                   if dz else math.nan)
+    dk = [a.k_path - b.k_path for a, b in repeats]
+    repeat_noise = (math.sqrt(float(np.mean(np.square(dk))) / 2.0) if dk else math.nan)
+    both = [x for x in (relax_noise, repeat_noise) if math.isfinite(x)]
+    return (max(both) if both else math.nan), relax_noise, repeat_noise
 
 
 CLEARLY = 2.0      # k_path is clearly positive above this many times its noise
@@ -424,12 +453,13 @@ def theory_verdict(eqs, fails, noise, dc) -> dict:
     [Pa])]; ``noise``: k_path's noise [Pa] (``k_noise``); ``dc``: the smallest step [Pa].
 
     k_path is *clearly positive* above ``CLEARLY`` times its noise. The crossing: the zero of
-    k_path, interpolated linearly in c between the last equilibrium where k_path is clearly
-    positive and the next (the band: where k_path = +-CLEARLY noise there; an equilibrium past
-    it whose k_path is positive but within the noise does not move it: at 4000 disks one such,
-    +1.8e6 Pa against a noise of 4.1e6 Pa, lies between two of -1.6e7 and -5.6e8 Pa); the
-    overshoot: how far past it, in c and in eps1, the dead load still held (the c peak at rest,
-    the last equilibrium). The verdict:
+    k_path, interpolated linearly in c between the first equilibrium with k_path <= 0 after the
+    last one where it is clearly positive, and the one before it (the band: where k_path = +-
+    CLEARLY noise there). A positive k_path within the noise after the crossing does not move it
+    (at 4000 disks one, +1.8e6 Pa against a noise of 4.1e6 Pa, lies between two of -1.6e7 and
+    -5.6e8 Pa), nor do positive ones within the noise before it (they are the rise's last
+    equilibria). The overshoot: how far past it, in c and in eps1, the dead load still held (the
+    c peak at rest, the last equilibrium). The verdict:
     "passes" when no hold of +dc failed from an equilibrium where k_path is clearly positive
     and k_path is not clearly positive at the last equilibrium; "contradicted" when a hold of +dc
     failed from an equilibrium where k_path is clearly positive; "no verdict" without a failing
@@ -457,10 +487,11 @@ def theory_verdict(eqs, fails, noise, dc) -> dict:
     against = [f for f in dc_fails if kk.get(f[0], (nan, False))[1]]
     out["finite_step_failures"] = sum(1 for f in fails if f[1] > dc * (1 + 1e-9)
                                       and kk.get(f[0], (nan, False))[1])
-    # the crossing: after the last equilibrium with k_path clearly positive (if one follows)
+    # the crossing: the first k_path <= 0 after the last clearly positive one (if one follows)
     above = np.flatnonzero(pos)
-    if len(above) and above[-1] < len(k) - 1:
-        a = int(above[-1])
+    after = np.flatnonzero(k[above[-1]:] <= 0) + above[-1] if len(above) else []
+    if len(above) and len(after):
+        a = int(after[0]) - 1
 
         def zero(level):
             return float(np.interp(level, [k[a + 1], k[a]], [c[a + 1], c[a]])), \
@@ -618,14 +649,20 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
                     f"(dc {pr.c_after - pr.c_before:+.1f} Pa over d eps1 {pr.d_eps1:.3g}), "
                     f"{pr.outcome}")
             probes[key] = pr
-        noise = k_noise(list(probes.values()), opts.probe_d_eps1)
+        repeats = [(probes[starts[i]], probes[f"h{i}_end"]) for i in baselines.values()
+                   if starts[i] in probes and f"h{i}_end" in probes]
+        noise, relax_noise, repeat_noise = k_noise(list(probes.values()), opts.probe_d_eps1,
+                                                   repeats)
         eqk = [(k, c, e, probes[k].k_path if probes[k].outcome == "equilibrium" else math.nan)
                for k, c, e in eq]
         fails = [(starts[i], ct - cf) for i, (ro, cf, ct, h) in enumerate(holds)
                  if ro == "stair" and h.outcome == "failure"]
         verdict = theory_verdict(eqk, fails, noise, dc) if end == "past found" else \
             {**theory_verdict(eqk, [], noise, dc), "why": f"the rest search ended: {end}"}
-        verdict.update(probe_d_eps1=opts.probe_d_eps1, probe_rate=opts.probe_rate)
+        st0 = journal.state("relaxed_start")
+        verdict.update(k_noise_relax=relax_noise, k_noise_repeat=repeat_noise,
+                       probe_d_eps1=opts.probe_d_eps1,
+                       probe_rate=probe_rate_of(len(st0.r), st0.params.dt, opts))
         log(f"theory: {verdict['verdict']} ({verdict['why']})")
     return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds, c_peak,
                        e_peak, eta_peak, switches, end, time.time() - t0, starts, probes,
@@ -690,7 +727,7 @@ class _Journal:
     def probe(self, key):
         for r in self.records:
             if r["kind"] == "probe" and r["key"] == key:
-                return ProbeResult(**{f: r[f] for f in ProbeResult._fields})
+                return ProbeResult(**{f: r[f] for f in ProbeResult._fields if f in r})
         return None
 
     def add_probe(self, p: ProbeResult):

@@ -2,7 +2,7 @@
 cut down to its floor, still does not converge (docs/hmodel.md, "Every path ends in an answer").
 
 Controlled variables e' = A de (the strain-controlled ones prescribed) and their conjugate
-stresses s' = A^-T sigma (the stress-controlled ones prescribed), ``driver.MixedControl``. With
+stresses s' = A^-T sigma (the stress-controlled ones prescribed), ``mixed.MixedControl``. With
 the tangent M of the increment, the stress-controlled (free) entries of a step solve
 
     M'_ff de'_f = ds'_f - M'_fp de'_p,     M' = A^-T M A^-1,
@@ -41,6 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .material import HState, to_voigt, update_copies
+from .mixed import MixedControl, MixedControlError, mixed_step
 from .params import HParams
 
 __all__ = ["Verdict", "PathEnd", "decide", "control_scan", "describe_control", "stress_name",
@@ -217,9 +218,8 @@ def control_scan(state: HState, params: HParams, control, de_p, s_target, t, k: 
     """The conjugate stresses s' (n, 3) [Pa], tangents (n, 3, 3) (d sigma / d de, the kernel's
     rows) and strain increments (n, 3) of the increments from ``state`` whose controlled
     variables are ``de_p`` (3,) with e'_k = each of ``t`` (n,). With other free entries than k,
-    those are solved at each point so that their s' reach ``s_target`` (3,) (``driver.mixed_step``
+    those are solved at each point so that their s' reach ``s_target`` (3,) (``mixed.mixed_step``
     with e'_k prescribed, from the previous point's solution; rows where it fails are NaN)."""
-    from .driver import MixedControl, MixedControlError, mixed_step
     _, A, Ainv = control.matrices()
     t = np.atleast_1d(np.asarray(t, float))
     n = t.size

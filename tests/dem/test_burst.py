@@ -272,3 +272,22 @@ def test_verdict_contradicted_and_the_cases_without_one():
     # k_path within the noise already at the start: no crossing located, the verdict stands
     v = theory_verdict(_eqs([1e6, -3e7]), [("e1", 100.0)], 1e6, 100.0)
     assert v["verdict"] == "passes" and math.isnan(v["c_cross"]) and "first" in v["why"]
+
+
+def test_the_crossing_after_the_last_clearly_positive_k_path_and_the_noise_of_repeats():
+    # the 2000-disk pattern at the rule's probe rate: k_path positive but within the noise on
+    # the rise's last equilibria, then negative: the crossing between the last positive and the
+    # first negative, not at the last clearly positive one
+    from dem.burst import ProbeResult, k_noise, theory_verdict
+    v = theory_verdict(_eqs([1.8e8, 1.4e7, 4.9e7, 6.5e7, 3.5e7, 3.3e7, -5e7]), [("e6", 100.0)],
+                       2e7, 100.0)
+    assert v["verdict"] == "passes"
+    assert v["c_cross"] == pytest.approx(70e3 + 2e3 * 3.3 / 8.3, rel=1e-12)
+    # the noise: the larger of the relaxations' (sqrt 2 RMS of c_before - c_state over d eps1,
+    # the dead-load equilibria only) and the repeats' (RMS of the pairs' differences / sqrt 2)
+    p = lambda key, dz, k: ProbeResult(key, 0.0, dz, 0.0, 0.0, 1e-5, k, 0.0, "equilibrium", 1, 0.0)
+    probes = [p("relaxed_start", 500.0, 1e8), p("h1_end", 30.0, 6e7), p("h2_end", -40.0, 2e7)]
+    noise, relax, rep = k_noise(probes, 1e-5, [(probes[1], probes[2])])
+    assert relax == pytest.approx(math.sqrt(2) * math.sqrt((30.0 ** 2 + 40.0 ** 2) / 2) / 1e-5)
+    assert rep == pytest.approx(4e7 / math.sqrt(2)) and noise == max(relax, rep) == rep
+    assert k_noise(probes[:1], 1e-5)[0] != k_noise(probes[:1], 1e-5)[0]      # nan: none of either

@@ -31,7 +31,16 @@ Modules (each imports only those above it):
   driver       ``advance``: many steps in one call, with the energy ledger's slots (L_*)
   diagnostics  elastic energy, contact snapshot, per-particle stress, net forces
 Every name of them is importable from here (``from dem import kernels; kernels.advance``).
+
+Numba's cache knows a kernel's own file only (the index of each cached function holds the hash
+of that one file), so a kernel of ``step`` or ``driver`` would keep, from the cache, the contact
+law it inlined from ``contact`` after ``contact`` changed.  ``_drop_stale_cache`` closes that
+gap: on import, every cached kernel of the package is dropped when any of its files changed.
 """
+import contextlib
+import hashlib
+import os
+
 from .common import FAST, U
 from .contact import _contact_law, _normal_force, _rolling_moment
 from .diagnostics import contact_snapshot, elastic_energy, net_forces, particle_stress
@@ -42,3 +51,50 @@ from .neighbours import (_neighbours_of, build_pairs, carry_history, cell_sort, 
 from .step import (CHUNK, _block_step, _leapfrog_disk, _leapfrog_ledger, _ledger_disk,
                    block_partition, blocks_step, cross_forces, cross_pairs)
 from .walls import _dead_load, _servo_tied, servo_walls, wall_forces
+
+
+def _drop_stale_cache(src_dir, cache_dir) -> bool:
+    """Drop the Numba cache files of this package's modules (``<module>.*.nbi``/``.nbc`` in
+    ``cache_dir``) unless the hash of all its sources (``src_dir``'s ``*.py``) is the one
+    recorded beside them in ``kernels-sources.sha256`` by the last drop; then record it.  A
+    kernel compiled from one module and inlining another's (``advance`` and the contact law) is
+    so never loaded from the cache after either changed: everything compiles again, once.
+    Returns True if it dropped them.  A cache folder that cannot be written is left as it is
+    (Numba caches nothing there either)."""
+    stems = sorted(f[:-3] for f in os.listdir(src_dir) if f.endswith(".py"))
+    h = hashlib.sha256()
+    for stem in stems:
+        with open(os.path.join(src_dir, stem + ".py"), "rb") as f:
+            h.update(stem.encode() + b"\0" + f.read() + b"\0")
+    digest = h.hexdigest()
+    stamp = os.path.join(cache_dir, "kernels-sources.sha256")
+    try:
+        with open(stamp) as f:
+            if f.read().strip() == digest:
+                return False
+    except OSError:
+        pass
+    try:
+        names = os.listdir(cache_dir)
+    except OSError:
+        names = []
+    ours = tuple(stem + "." for stem in stems)
+    try:
+        for name in names:
+            if name.startswith(ours) and name.endswith((".nbi", ".nbc")):
+                with contextlib.suppress(FileNotFoundError):     # another process was first
+                    os.remove(os.path.join(cache_dir, name))
+        os.makedirs(cache_dir, exist_ok=True)
+        tmp = f"{stamp}.{os.getpid()}.tmp"
+        with open(tmp, "w") as f:
+            f.write(digest + "\n")
+        os.replace(tmp, stamp)
+    except OSError:
+        pass
+    return True
+
+
+_cache = getattr(advance, "_cache", None)        # None with NUMBA_DISABLE_JIT
+if getattr(_cache, "cache_path", None):
+    _drop_stale_cache(os.path.dirname(os.path.abspath(__file__)), _cache.cache_path)
+del _cache

@@ -141,7 +141,8 @@ class Simulation:
     def run(self, nsteps: int):
         """Advance nsteps time steps under the current control."""
         p = self.params
-        mode, s_from, s_to, ramp_start, ramp_len, rate, len0, ratio, mass = self.control.arrays()
+        (mode, s_from, s_to, ramp_start, ramp_len, rate, len0, ratio, mass,
+         g_held) = self.control.arrays()
         left = int(nsteps)
         while left > 0:
             pl = self.pairs
@@ -161,8 +162,8 @@ class Simulation:
                 p.rolling_stiffness * p.kt, self.mu_r, self.damping,
                 self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
                 self.vmax_override or p.servo_vmax,
-                0.5 * p.skin, nblocks, ratio, mass, *(self.ledger.arrays() if self.ledger is not None
-                                                 else _NO_LEDGER))
+                0.5 * p.skin, nblocks, ratio, mass, g_held,
+                *(self.ledger.arrays() if self.ledger is not None else _NO_LEDGER))
             self.threads.record(nth, done * self.n, time.perf_counter() - t0)
             left -= done
             self.step += done

@@ -26,7 +26,8 @@ Modules (each imports only those above it):
   common       the unsigned index type U and the step kernels' compile options FAST
   neighbours   cell sort, pair list, history carried to a new list, wall candidates
   contact      the contact law of a pair: normal force, tangential force, rolling moment
-  walls        wall forces, the walls' control for a step (servo, tied servo, dead load)
+  walls        wall forces, the walls' control for a step (servo, tied servo, dead load),
+               the generalized force G = F1 + k F2 of the tied walls (one definition)
   step         blocks of disks, the pairs between them, one step of a block (``_block_step``)
   driver       ``advance``: many steps in one call, with the energy ledger's slots (L_*)
   diagnostics  elastic energy, contact snapshot, per-particle stress, net forces
@@ -50,7 +51,7 @@ from .neighbours import (_neighbours_of, build_pairs, carry_history, cell_sort, 
                          wall_candidates)
 from .step import (CHUNK, _block_step, _leapfrog_disk, _leapfrog_ledger, _ledger_disk,
                    block_partition, blocks_step, cross_forces, cross_pairs)
-from .walls import _dead_load, _servo_tied, servo_walls, wall_forces
+from .walls import _dead_load, _servo_tied, generalized_force, servo_walls, wall_forces
 
 
 def _drop_stale_cache(src_dir, cache_dir) -> bool:

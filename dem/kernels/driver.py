@@ -27,7 +27,7 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
             x_ref, walls_ref, disp2, walls, prev, wF, wK,
             mode, s_from, s_to, ramp_start, ramp_len, rate, len0, step0,
             kn, kt, mu, cap_on, beta, kr, mur, damping, dt, thickness, gain, smoothing, vmax,
-            half_skin, nblocks, ratio, wall_mass, lsc, led, F0):
+            half_skin, nblocks, ratio, wall_mass, g_held, lsc, led, F0):
     """Run up to nsteps time steps; stop early when the neighbour list must be rebuilt.
 
     Returns the number of steps done.  step0 is the global step counter at entry (the
@@ -36,7 +36,8 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
     it, see ``_block_step``).  One block is the plain serial loop.  Rolling resistance:
     kr = rolling_stiffness * kt [N/m], mur = current rolling friction (0 = off); fnet (N,4).
     ``ratio``: R of the tied controls (modes 2, 3, ``servo_walls``), ``wall_mass`` the walls'
-    generalized mass under a dead load (mode 3); unused by the other modes.
+    generalized mass and ``g_held`` the held generalized force [N] under a dead load (mode 3);
+    unused by the other modes.
 
     The energy ledger (``dem.ledger``), off when ``lsc`` is empty: ``lsc`` (L_SIZE,) its scalar
     sums (the L_* slots), ``led`` (6, N) the per-disk sums of ``_block_step``, ``F0`` (N, 3)
@@ -85,10 +86,10 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
         else:
             rt = 1.0
         servo_walls(walls, wF, wK, mode, s_from, s_to, rt, rate, len0, prev, thickness,
-                    gain, smoothing, vmax, dt, ratio, wall_mass)
+                    gain, smoothing, vmax, dt, ratio, wall_mass, g_held)
         if ledger:
             _ledger_walls(lsc, wF, pb, prev, fw, vc, cand_off, cand, v, dt,
-                          s_to[1] if mode[1] == 3 else math.nan)
+                          g_held if mode[1] == 3 else math.nan)
             if lsc[L_STARTED] == 0.0:
                 for p in range(n):
                     F0[p, 0] = fnet[p, 0]

@@ -1,6 +1,8 @@
 """The walls: their forces on the disks (``wall_forces``) and their control for one step
 (``servo_walls``: the stress servo, strain rate, the tied servo ``_servo_tied`` and the dead
-load ``_dead_load``)."""
+load ``_dead_load``), with the generalized force of the tied walls, G = F1 + k F2
+(``generalized_force``: the one definition, also called from Python by ``dem.walls`` and
+``dem.burst``)."""
 import math
 
 from numba import njit
@@ -53,13 +55,13 @@ def wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK, fw):
 # --------------------------------------------------------------------------------------
 @njit(**FAST)
 def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thickness,
-                gain, smoothing, vmax, dt, ratio, wall_mass):
+                gain, smoothing, vmax, dt, ratio, wall_mass, g_held):
     """Move the walls for one step.
 
     mode (2,): per axis (0 = x walls, 1 = y walls) 0 = stress control, 1 = strain rate, or
     both 2 = tied (``_servo_tied``; ``ratio`` = R, used by it only), or both 3 = tied under a
-    dead load (``_dead_load``: the held force s_to[1] [N], the walls' generalized mass
-    ``wall_mass`` [kg]).
+    dead load (``_dead_load``: the held generalized force ``g_held`` [N], the walls'
+    generalized mass ``wall_mass`` [kg]; unused by the other modes).
     Stress target = s_from + (s_to - s_from) * ramp_t (compression positive) [Pa].
     Stress control: inward displacement gain * (F_target - F) / sum(k_contacts), clipped to
     vmax*dt and smoothed with the previous one (prev (4,) is updated).
@@ -70,7 +72,7 @@ def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thi
                     thickness, gain, smoothing, vmax, dt, ratio)
         return
     if mode[1] == 3:
-        _dead_load(walls, wF, s_to[1], wall_mass, len0, prev, dt, ratio)
+        _dead_load(walls, wF, g_held, wall_mass, len0, prev, dt, ratio)
         return
     for axis in range(2):
         other = 1 - axis
@@ -121,7 +123,7 @@ def _servo_tied(walls, wF, wK, c_target, len0, prev, thickness, gain, smoothing,
     w = walls[1] - walls[0]
     h = walls[3] - walls[2]
     a = ratio * w / h
-    g = 0.5 * (wF[2] + wF[3]) + a * 0.5 * (wF[0] + wF[1])
+    g = generalized_force(0.5 * (wF[2] + wF[3]), 0.5 * (wF[0] + wF[1]), a)
     err = c_target * w * thickness - g
     k = ratio * len0[0] / len0[1]
     kg = 0.5 * (wK[2] + wK[3]) + a * k * 0.5 * (wK[0] + wK[1])
@@ -156,7 +158,7 @@ def _dead_load(walls, wF, g_held, m_g, len0, prev, dt, ratio):
     holds the walls' moves of the last step, so the y walls' prev[2] = U1'(n-1/2) dt / 2: the
     velocity needs no other memory, and a state saved under this control continues it."""
     k = ratio * len0[0] / len0[1]
-    g = 0.5 * (wF[2] + wF[3]) + k * 0.5 * (wF[0] + wF[1])
+    g = generalized_force(0.5 * (wF[2] + wF[3]), 0.5 * (wF[0] + wF[1]), k)
     d = prev[2] + 0.5 * dt * dt * (g_held - g) / m_g
     dx = k * d
     prev[0] = dx
@@ -167,3 +169,16 @@ def _dead_load(walls, wF, g_held, m_g, len0, prev, dt, ratio):
     walls[1] -= dx
     walls[2] += d
     walls[3] -= d
+
+
+@njit(**FAST)
+def generalized_force(f1, f2, k):
+    """G = F1 + k F2 [N]: the generalized force of the tied walls, F1 and F2 the mean compressive
+    forces on the two y walls and on the two x walls [N].  With k = R W0 / H0 (the tie, each x
+    wall moving k times as far as each y wall) G is conjugate to the platens' shortening U1,
+    F1 dU1 + F2 dU2 = G dU1 exactly (``_dead_load``, ``dem.walls.generalized_force``, the dead
+    load's stress error in ``dem.burst``); with k = R W / H it is W t c, c = s1 + R s2 the
+    stress the tied servo holds (``_servo_tied``).  The one place the sum is written: the
+    kernels and the Python side get the same bits from it (x 0.5 of a sum, as the callers
+    give F1 and F2, is exact, so k 0.5 (a + b) and k (0.5 (a + b)) are the same number)."""
+    return f1 + k * f2

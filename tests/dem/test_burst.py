@@ -85,7 +85,7 @@ def test_the_servo_stiffness_is_dG_dU_of_the_wall_contacts(small_sample):
     prev = np.zeros(4)
     kernels.servo_walls(walls, wF, wK, np.array([TIED, TIED]), np.zeros(2),
                         np.array([0.0, c_target]), 1.0, np.zeros(2), sim.ref_len, prev,
-                        p.thickness, 1.0, 1.0, 1.0, p.dt, R, 0.0)
+                        p.thickness, 1.0, 1.0, 1.0, p.dt, R, 0.0, 0.0)
     g1, w1, _, _ = g_of(walls)
     assert abs(g1 - c_target * w1 * p.thickness) < 0.01 * 30.0
     # and with R^2 dropped from the stiffness (the x walls' share) it would not

@@ -68,4 +68,4 @@ def test_a_change_in_another_module_reaches_a_cached_kernel(tmp_path):
     text = nb.read_text()
     assert text.count("off[pi[k] + 1] += 1") == 1
     nb.write_text(text.replace("off[pi[k] + 1] += 1", "off[pi[k] + 1] += 2"))
-    assert run() == "[0, 4, 8]"          # the new row_offsets (blocks [0, 1), [1, 4)), not the cache
+    assert run() == "[0, 4, 8]"      # the new row_offsets (blocks [0, 1), [1, 4)), not the cache

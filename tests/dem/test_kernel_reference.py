@@ -135,7 +135,7 @@ def _kernel_steps(s, nsteps, kn, kt, mu, cap_on, beta, kr, mur, damping, nblocks
                         s.disp2, s.walls, s.prev, s.wF, s.wK, mode, zero2, zero2, 0, 0, rate,
                         len0, step, kn, kt, mu, cap_on, beta, kr, mur, damping, s.dt,
                         p.thickness, p.servo_gain, p.servo_smoothing, p.servo_vmax,
-                        0.5 * p.skin, nblocks, 0.0, 0.0, np.zeros(0), np.zeros((6, 0)),
+                        0.5 * p.skin, nblocks, 0.0, 0.0, 0.0, np.zeros(0), np.zeros((6, 0)),
                         np.zeros((0, 3)))
         capped.append(_reference_step(ref, ref_ft, ref_mr, fext, kn, kt, mu, cap_on, beta, kr,
                                       mur, damping, s.dt))

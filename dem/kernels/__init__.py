@@ -1,6 +1,7 @@
 """Numba kernels: every per-particle / per-contact loop of the DEM lives in this package.
 
-Kernels take only arrays and scalars.  Conventions (2D, thickness t):
+Kernels take only arrays and scalars (``advance``: tuples of them, ``common``).  Conventions
+(2D, thickness t):
   x (N,2) positions [m], v (N,2) velocities [m/s], w (N,) spins [rad/s],
   r (N,) radii [m], m (N,) masses [kg], inertia (N,) [kg m^2].
   Pair list: pi, pj (P,) int32 with pi < pj, sorted by (pi, pj); ft (P,) tangential
@@ -23,7 +24,8 @@ impossible with positive radii: +4 %); a block's pairs go through an L1 scratch 
 vectorized (1.2-1.3x; ``_block_step``, tested against a plain one-loop step to the bit).
 
 Modules (each imports only those above it):
-  common       the unsigned index type U and the step kernels' compile options FAST
+  common       the unsigned index type U, the step kernels' compile options FAST, the records
+               that group ``advance``'s arguments (Disks, PairList, WallState, Servo, Law)
   neighbours   cell sort, pair list, history carried to a new list, wall candidates
   contact      the contact law of a pair: normal force, tangential force, rolling moment
   walls        wall forces, the walls' control for a step (servo, tied servo, dead load),
@@ -42,7 +44,7 @@ import contextlib
 import hashlib
 import os
 
-from .common import FAST, U
+from .common import FAST, U, Disks, Law, PairList, Servo, WallState
 from .contact import _contact_law, _normal_force, _rolling_moment
 from .diagnostics import contact_snapshot, elastic_energy, net_forces, particle_stress
 from .driver import (L_D_DASH_WALL, L_DU, L_FW0, L_SIZE, L_STARTED, L_STEPS, L_W_EXT,

@@ -23,30 +23,41 @@ L_SIZE = 13
 
 
 @njit(**FAST)
-def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, cand, fext, fnet,
-            x_ref, walls_ref, disp2, walls, prev, wF, wK,
-            mode, s_from, s_to, ramp_start, ramp_len, rate, len0, step0,
-            kn, kt, mu, cap_on, beta, kr, mur, damping, dt, thickness, gain, smoothing, vmax,
-            half_skin, nblocks, ratio, wall_mass, g_held, lsc, led, F0):
+def advance(nsteps, disks, pairs, ws, servo, law, step0, half_skin, nblocks, books):
     """Run up to nsteps time steps; stop early when the neighbour list must be rebuilt.
 
-    Returns the number of steps done.  step0 is the global step counter at entry (the
-    stress ramp of the servo is a function of it, so a chunked run equals a single run).
-    ``nblocks``: blocks of disks run concurrently (one per thread; results do not depend on
-    it, see ``_block_step``).  One block is the plain serial loop.  Rolling resistance:
-    kr = rolling_stiffness * kt [N/m], mur = current rolling friction (0 = off); fnet (N,4).
-    ``ratio``: R of the tied controls (modes 2, 3, ``servo_walls``), ``wall_mass`` the walls'
-    generalized mass and ``g_held`` the held generalized force [N] under a dead load (mode 3);
-    unused by the other modes.
+    Returns the number of steps done.  ``disks``, ``pairs``, ``ws``, ``servo``, ``law``: the
+    disks' arrays, the pair list, the walls, their control and the contact law, each a tuple
+    in the order of its record (``Disks``, ``PairList``, ``WallState``, ``Servo``, ``Law``;
+    arrays read and written in place).  Plain tuples (``tuple(record)``, or built in that
+    order as ``Simulation.run`` does): Numba types a named tuple at every call in Python
+    (measured +9 us a call; a 300-disk step is 7 us), a plain one in C; the records also
+    work, at that cost.
+    step0 is the global step counter at entry (the stress ramp of the servo is a function of
+    it, so a chunked run equals a single run).  ``half_skin``: half the skin of the pair list
+    [m] (a disk or a wall that moved further asks for a rebuild).  ``nblocks``: blocks of
+    disks run concurrently (one per thread; results do not depend on it, see
+    ``_block_step``).  One block is the plain serial loop.  Rolling resistance: law.kr =
+    rolling_stiffness * kt [N/m], law.mur = current rolling friction (0 = off).
+    ``servo.ratio``: R of the tied controls (modes 2, 3, ``servo_walls``), ``wall_mass`` the
+    walls' generalized mass and ``g_held`` the held generalized force [N] under a dead load
+    (mode 3); unused by the other modes.
 
-    The energy ledger (``dem.ledger``), off when ``lsc`` is empty: ``lsc`` (L_SIZE,) its scalar
-    sums (the L_* slots), ``led`` (6, N) the per-disk sums of ``_block_step``, ``F0`` (N, 3)
-    receives at the ledger's first step the net force and torque of every disk (F_p(0) of
-    Eq. 14's unbalanced term).  The walls' centred displacement is dU_w(n) = (d(n-1/2) +
-    d(n+1/2)) / 2 with d the servo's inward move of a step (``prev`` before and after it);
-    each wall contact's work uses its force of the step and the disk's centred displacement.
-    The ledger only reads the trajectory: the same bits with it as without it.
+    The energy ledger (``dem.ledger``), ``books`` = (lsc, led, F0), off when ``lsc`` is empty:
+    ``lsc`` (L_SIZE,) its scalar sums (the L_* slots), ``led`` (6, N) the per-disk sums of
+    ``_block_step``, ``F0`` (N, 3) receives at the ledger's first step the net force and torque
+    of every disk (F_p(0) of Eq. 14's unbalanced term).  The walls' centred displacement is
+    dU_w(n) = (d(n-1/2) + d(n+1/2)) / 2 with d the servo's inward move of a step (``prev``
+    before and after it); each wall contact's work uses its force of the step and the disk's
+    centred displacement.  The ledger only reads the trajectory: the same bits with it as
+    without it.
     """
+    x, v, w, theta, r, m, inertia, fext, fnet, x_ref, disp2 = disks
+    pi, pj, ft, mr, cand_off, cand = pairs
+    walls, walls_ref, prev, wF, wK = ws
+    mode, _, _, ramp_start, ramp_len, _, _, _, _, g_held, _, _, _, _ = servo
+    kn, kt, mu, cap_on, beta, kr, mur, damping, dt = law
+    lsc, led, F0 = books
     hs2 = half_skin * half_skin
     n = x.shape[0]
     bounds, kbounds = block_partition(pi, n, nblocks)
@@ -85,8 +96,7 @@ def advance(nsteps, x, v, w, theta, r, m, inertia, pi, pj, ft, mr, cand_off, can
             rt = min(max(rt, 0.0), 1.0)
         else:
             rt = 1.0
-        servo_walls(walls, wF, wK, mode, s_from, s_to, rt, rate, len0, prev, thickness,
-                    gain, smoothing, vmax, dt, ratio, wall_mass, g_held)
+        servo_walls(walls, wF, wK, prev, servo, rt, dt)
         if ledger:
             _ledger_walls(lsc, wF, pb, prev, fw, vc, cand_off, cand, v, dt,
                           g_held if mode[1] == 3 else math.nan)

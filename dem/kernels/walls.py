@@ -54,19 +54,20 @@ def wall_forces(x, v, r, m, walls, cand_off, cand, fext, kn, beta, wF, wK, fw):
 # Wall control (YADE TriaxialStressController-like servo)
 # --------------------------------------------------------------------------------------
 @njit(**FAST)
-def servo_walls(walls, wF, wK, mode, s_from, s_to, ramp_t, rate, len0, prev, thickness,
-                gain, smoothing, vmax, dt, ratio, wall_mass, g_held):
-    """Move the walls for one step.
+def servo_walls(walls, wF, wK, prev, servo, ramp_t, dt):
+    """Move the walls (4,) for one step under the control ``servo`` (a ``Servo``, as a tuple).
 
-    mode (2,): per axis (0 = x walls, 1 = y walls) 0 = stress control, 1 = strain rate, or
-    both 2 = tied (``_servo_tied``; ``ratio`` = R, used by it only), or both 3 = tied under a
-    dead load (``_dead_load``: the held generalized force ``g_held`` [N], the walls'
+    servo.mode (2,): per axis (0 = x walls, 1 = y walls) 0 = stress control, 1 = strain rate,
+    or both 2 = tied (``_servo_tied``; ``ratio`` = R, used by it only), or both 3 = tied under
+    a dead load (``_dead_load``: the held generalized force ``g_held`` [N], the walls'
     generalized mass ``wall_mass`` [kg]; unused by the other modes).
     Stress target = s_from + (s_to - s_from) * ramp_t (compression positive) [Pa].
     Stress control: inward displacement gain * (F_target - F) / sum(k_contacts), clipped to
     vmax*dt and smoothed with the previous one (prev (4,) is updated).
     Strain control: each wall moves inward at rate * len0 / 2 [m/s] (rate > 0 compresses).
     """
+    (mode, s_from, s_to, _, _, rate, len0, ratio, wall_mass, g_held, thickness, gain,
+     smoothing, vmax) = servo
     if mode[1] == 2:
         _servo_tied(walls, wF, wK, s_from[1] + (s_to[1] - s_from[1]) * ramp_t, len0, prev,
                     thickness, gain, smoothing, vmax, dt, ratio)

@@ -138,15 +138,7 @@ def _servo_tied(walls, wF, wK, c_target, len0, prev, thickness, gain, smoothing,
     elif d < -lim:
         d = -lim
     d = smoothing * d + (1.0 - smoothing) * prev[2]
-    dx = k * d
-    prev[0] = dx
-    prev[1] = dx
-    prev[2] = d
-    prev[3] = d
-    walls[0] += dx
-    walls[1] -= dx
-    walls[2] += d
-    walls[3] -= d
+    _move_tied(walls, prev, d, k)
 
 
 @njit(**FAST)
@@ -161,6 +153,13 @@ def _dead_load(walls, wF, g_held, m_g, len0, prev, dt, ratio):
     k = ratio * len0[0] / len0[1]
     g = generalized_force(0.5 * (wF[2] + wF[3]), 0.5 * (wF[0] + wF[1]), k)
     d = prev[2] + 0.5 * dt * dt * (g_held - g) / m_g
+    _move_tied(walls, prev, d, k)
+
+
+@njit(**FAST)
+def _move_tied(walls, prev, d, k):
+    """The tied walls' move of a step: each y wall inward by d [m], each x wall by k d (the tie,
+    k = R W0 / H0); ``prev`` records the moves (the servo's and the dead load's memory)."""
     dx = k * d
     prev[0] = dx
     prev[1] = dx

@@ -846,7 +846,7 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
 
         def error(sx, sy):
             w, h = sim.size
-            return abs((sy * w + kx * sx * h) * t - g_held) / (w * t)
+            return abs(kernels.generalized_force(sy * w * t, sx * h * t, kx) - g_held) / (w * t)
     else:
         sim.set_control(tied(ratio, c_target, c_target, sim.step, 0, sim.ref_len))
 

@@ -2,14 +2,15 @@
 temporary file in the target directory and is moved in place with os.replace, so an
 interrupted run never leaves a half-written file under the final name.
 
-State file format (npz, FORMAT_VERSION = 4), arrays:
+State file format (npz, FORMAT_VERSION = 5), arrays:
   format ("dem-state"), format_version (int), params (JSON of DemParams),
   x, v (N,2), w, theta, r (N,), walls, walls_ref, prev (4,), x_ref (N,2),
   pi, pj (P,) int32, ft (P,), mr (P,) rolling-moment history, step, time, mu, mu_r, cap_on,
   ctrl_mode (2,), ctrl_s_from, ctrl_s_to (2,), ctrl_ramp (2,) [start, len], ctrl_rate,
   ctrl_len0 (2,), ctrl_ratio (R of the tied controls), ctrl_wall_mass (the walls' generalized
-  mass under a dead load), ref_len (2,), meta (JSON, free-form), and any named arrays saved with
-  it (``array_<name>``: a checkpoint's energy ledger).
+  mass under a dead load), ctrl_g_held (the dead load's held generalized force [N]), ref_len
+  (2,), meta (JSON, free-form), and any named arrays saved with it (``array_<name>``: a
+  checkpoint's energy ledger).
 Version 1 (before rolling resistance) is still read: no mr, mu_r, and params without
 rolling_friction / rolling_stiffness; it loads as a state without rolling resistance
 (rolling_friction 0, rolling_stiffness its default, mr and mu_r zero), which is what it was.
@@ -18,6 +19,10 @@ every control but the tied one.  (The version was raised so that code older than
 control refuses a file saved under it rather than running its mode 2 as strain control.)
 Versions 1-3 (before the dead load) have no ctrl_wall_mass: it loads as 0, the value of every
 control but the dead load (version 4, so that older code refuses a state saved under it).
+Versions 1-4 have no ctrl_g_held: it loads as 0, except from a version-4 file under the dead
+load, which held the force [N] in the y axis's stress targets (ctrl_s_from[1], ctrl_s_to[1]):
+it moves to g_held and those targets load as 0, the control ``walls.dead_load`` makes now
+(version 5, so that version-4 code refuses a file whose dead load it would read as no load).
 """
 from __future__ import annotations
 
@@ -32,11 +37,11 @@ import numpy as np
 
 from .params import DemParams
 from .simulation import State, Simulation
-from .walls import Control
+from .walls import DEAD, Control
 
 FORMAT = "dem-state"
-FORMAT_VERSION = 4
-READ_VERSIONS = (1, 2, 3, 4)
+FORMAT_VERSION = 5
+READ_VERSIONS = (1, 2, 3, 4, 5)
 # what a version-1 file's params lacked: the values its runs had
 V1_PARAMS = {"rolling_friction": 0.0, "rolling_stiffness": 1.0}
 
@@ -83,6 +88,7 @@ def save_state(path, state: State, meta: dict | None = None, arrays: dict | None
              ctrl_ramp=np.array([c.ramp_start, c.ramp_len], np.int64),
              ctrl_rate=np.asarray(c.rate, float), ctrl_len0=np.asarray(c.len0, float),
              ctrl_ratio=np.array(float(c.ratio)), ctrl_wall_mass=np.array(float(c.wall_mass)),
+             ctrl_g_held=np.array(float(c.g_held)),
              ref_len=state.ref_len, meta=np.array(json.dumps(meta or {})),
              **{"array_" + k: v for k, v in (arrays or {}).items()})
     atomic_write_bytes(path, buf.getvalue())
@@ -133,6 +139,8 @@ def load_state(path) -> tuple[State, dict]:
         raise ValueError(f"state file {path}: not a DEM state (missing ['ctrl_ratio'])")
     if ver >= 4 and "ctrl_wall_mass" not in d:
         raise ValueError(f"state file {path}: not a DEM state (missing ['ctrl_wall_mass'])")
+    if ver >= 5 and "ctrl_g_held" not in d:
+        raise ValueError(f"state file {path}: not a DEM state (missing ['ctrl_g_held'])")
     params = DemParams.from_dict(pd)
     n = len(d["r"])
     for k in ("x", "v", "x_ref"):
@@ -145,7 +153,11 @@ def load_state(path) -> tuple[State, dict]:
                    int(d["ctrl_ramp"][1]), tuple(map(float, d["ctrl_rate"])),
                    tuple(map(float, d["ctrl_len0"])),
                    float(d["ctrl_ratio"]) if ver >= 3 else 0.0,
-                   float(d["ctrl_wall_mass"]) if ver >= 4 else 0.0)
+                   float(d["ctrl_wall_mass"]) if ver >= 4 else 0.0,
+                   float(d["ctrl_g_held"]) if ver >= 5 else 0.0)
+    if ver == 4 and ctrl.mode == (DEAD, DEAD):     # the held force [N] was in the stress targets
+        ctrl = ctrl._replace(s_from=(ctrl.s_from[0], 0.0), s_to=(ctrl.s_to[0], 0.0),
+                             g_held=ctrl.s_to[1])
     st = State(params, d["x"], d["v"], d["w"], d["theta"], d["r"], d["walls"], d["walls_ref"],
                d["prev"], d["x_ref"], d["pi"].astype(np.int32), d["pj"].astype(np.int32),
                d["ft"], d["mr"], int(d["step"]), float(d["time"]), float(d["mu"]),

@@ -5,22 +5,10 @@ has moved more than skin/2 since the rebuild (two particles then approach by < s
 """
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from . import kernels
-
-
-class PairList(NamedTuple):
-    """pi, pj (P,) int32 with pi < pj sorted; ft (P,) tangential history [N]; mr (P,)
-    rolling-moment history [N m]; cand_off (5,), cand wall candidates."""
-    pi: np.ndarray
-    pj: np.ndarray
-    ft: np.ndarray
-    mr: np.ndarray
-    cand_off: np.ndarray
-    cand: np.ndarray
+from .kernels import PairList     # the record the step kernels take
 
 
 def build_pair_list(x, r, walls, skin, old_pi=None, old_pj=None, old_ft=None,

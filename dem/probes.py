@@ -272,7 +272,8 @@ def state_fingerprint(state: State) -> str:
     resistance (mu_r = 0 and no moment history: the run is then the same to the bit whatever
     ``rolling_stiffness``) the rolling fields are left out, so the fingerprint is the one of
     the code before rolling resistance existed and earlier checkpoints stay valid; so is the
-    tie's ratio of a control that is not tied."""
+    tie's ratio of a control that is not tied.  A dead load's control hashes as before its held
+    force had a field of its own (state format 4: in the y axis's stress targets)."""
     rolling = bool(state.params.rolling_friction != 0 or state.mu_r != 0 or np.any(state.mr))
     h = hashlib.sha256()
     for a in (state.x, state.v, state.w, state.theta, state.r, state.walls, state.walls_ref,
@@ -284,10 +285,13 @@ def state_fingerprint(state: State) -> str:
     if not rolling:
         params = {k: v for k, v in params.items()
                   if k not in ("rolling_friction", "rolling_stiffness")}
-    # the tie's ratio only under the tied controls, the wall mass only under the dead load (a
-    # control of the other modes hashes as before the fields existed)
-    c = list(state.control)
-    control = c if DEAD in state.control.mode else c[:8] if TIED in state.control.mode else c[:7]
+    # the tie's ratio only under the tied controls, the wall mass and the held force only under
+    # the dead load (a control of the other modes hashes as before the fields existed)
+    c = state.control
+    if DEAD in c.mode:
+        control = list(c._replace(s_from=(c.s_from[0], c.g_held), s_to=(c.s_to[0], c.g_held)))[:9]
+    else:
+        control = list(c)[:8] if TIED in c.mode else list(c)[:7]
     h.update(json.dumps([params, state.step, state.mu] + ([state.mu_r] if rolling else [])
                         + [state.cap_on, control], default=str).encode())
     return h.hexdigest()

@@ -141,10 +141,17 @@ class Simulation:
     def run(self, nsteps: int):
         """Advance nsteps time steps under the current control."""
         p = self.params
-        mode, s_from, s_to, ramp_start, ramp_len, rate, len0, ratio, mass = self.control.arrays()
+        # advance's records (kernels.Disks, WallState, Servo, Law) as plain tuples in their
+        # order: so they cost nothing beside the flat list they replaced (kernels.advance)
+        disks = (self.x, self.v, self.w, self.theta, self.r, self.m, self.inertia, self.fext,
+                 self.fnet, self.x_ref, self.disp2)
+        ws = (self.walls, self.walls_ref, self.prev, self.wF, self.wK)
+        servo = self.control.arrays() + (p.thickness, p.servo_gain, p.servo_smoothing,
+                                         self.vmax_override or p.servo_vmax)
+        law = (p.kn, p.kt, self.mu, self.cap_on, p.normal_damping_ratio,
+               p.rolling_stiffness * p.kt, self.mu_r, self.damping, self.dt)
         left = int(nsteps)
         while left > 0:
-            pl = self.pairs
             nth, chunk = self.threads.next(left)
             if self.nblocks is None:
                 numba.set_num_threads(nth)
@@ -152,17 +159,9 @@ class Simulation:
             else:   # a forced split runs on the threads the caller set
                 nblocks = int(self.nblocks)
             t0 = time.perf_counter()
-            done = kernels.advance(
-                chunk, self.x, self.v, self.w, self.theta, self.r, self.m, self.inertia,
-                pl.pi, pl.pj, pl.ft, pl.mr, pl.cand_off, pl.cand, self.fext, self.fnet, self.x_ref,
-                self.walls_ref, self.disp2, self.walls, self.prev, self.wF, self.wK,
-                mode, s_from, s_to, ramp_start, ramp_len, rate, len0, self.step,
-                p.kn, p.kt, self.mu, self.cap_on, p.normal_damping_ratio,
-                p.rolling_stiffness * p.kt, self.mu_r, self.damping,
-                self.dt, p.thickness, p.servo_gain, p.servo_smoothing,
-                self.vmax_override or p.servo_vmax,
-                0.5 * p.skin, nblocks, ratio, mass, *(self.ledger.arrays() if self.ledger is not None
-                                                 else _NO_LEDGER))
+            done = kernels.advance(chunk, disks, tuple(self.pairs), ws, servo, law, self.step,
+                                   0.5 * p.skin, nblocks, self.ledger.arrays()
+                                   if self.ledger is not None else _NO_LEDGER)
             self.threads.record(nth, done * self.n, time.perf_counter() - t0)
             left -= done
             self.step += done

@@ -83,9 +83,9 @@ def test_the_servo_stiffness_is_dG_dU_of_the_wall_contacts(small_sample):
     g0, w0, wF, wK = g_of(walls)
     c_target = (g0 + 30.0) / (w0 * p.thickness)        # 30 N above: no contact opens or closes
     prev = np.zeros(4)
-    kernels.servo_walls(walls, wF, wK, np.array([TIED, TIED]), np.zeros(2),
-                        np.array([0.0, c_target]), 1.0, np.zeros(2), sim.ref_len, prev,
-                        p.thickness, 1.0, 1.0, 1.0, p.dt, R, 0.0)
+    servo = kernels.Servo(np.array([TIED, TIED]), np.zeros(2), np.array([0.0, c_target]), 0, 0,
+                          np.zeros(2), sim.ref_len, R, 0.0, 0.0, p.thickness, 1.0, 1.0, 1.0)
+    kernels.servo_walls(walls, wF, wK, prev, tuple(servo), 1.0, p.dt)
     g1, w1, _, _ = g_of(walls)
     assert abs(g1 - c_target * w1 * p.thickness) < 0.01 * 30.0
     # and with R^2 dropped from the stiffness (the x walls' share) it would not

@@ -2,6 +2,7 @@
 dynamic degree of freedom, the platens' shortening U1, with the walls' generalized mass m_G under
 a constant generalized force, integrated by the disks' leapfrog."""
 import math
+import os
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ import pytest
 from dem import io
 from dem.ledger import Ledger
 from dem.params import DemParams
+from dem.probes import state_fingerprint
 from dem.simulation import Simulation
 from dem.walls import dead_load, generalized_force
 
@@ -61,7 +63,7 @@ def test_the_ledger_of_a_dead_load_counts_the_walls_and_closes():
     # W2_ext = (G_held - G(0)) U1 exactly (G(0) the walls' force of the first step), and with
     # no dissipation the kinetic and elastic energies trade to O(dt^2) (split residual).
     sim = _wall_on_a_spring(50.0)
-    g_held = sim.control.s_to[1]
+    g_held = sim.control.g_held
     led = Ledger(sim)
     h0 = sim.walls[3] - sim.walls[2]
     sim.run(1)
@@ -97,6 +99,33 @@ def test_dead_load_state_round_trip_and_older_versions(tmp_path):
     a.run(200)
     b.run(200)
     assert np.array_equal(a.walls, b.walls) and np.array_equal(a.x, b.x)
+
+
+def test_a_version_4_dead_load_file_loads_converted_and_continues_to_the_bit(tmp_path):
+    # data/dead_load_v4.npz (data/README_reference.md): written by the code that held G_held in
+    # the y axis's stress targets (format version 4). It loads with G_held in its own field and
+    # stress targets 0, the control dead_load makes now, hashes as it did there, and runs on as
+    # that code ran it, to the bit; saved again, it is a version-5 file of the same state
+    st, meta = io.load_state(os.path.join(os.path.dirname(__file__), "data", "dead_load_v4.npz"))
+    c = st.control
+    assert c.g_held == meta["g_held"] < 0 and c.s_from == c.s_to == (0.0, 0.0)
+    assert c == dead_load(c.ratio, meta["g_held"], c.wall_mass, c.len0)
+    assert state_fingerprint(st) == meta["fingerprint"]
+    other = st._replace(control=c._replace(g_held=c.g_held + 1.0))
+    assert state_fingerprint(other) != meta["fingerprint"]
+    sim = Simulation(st)
+    sim.run(300)
+    after = meta["arrays"]
+    for k in ("walls", "prev", "x", "v"):
+        assert np.array_equal(getattr(sim, k), after[k + "_300"]), k
+    io.save_state(tmp_path / "v5.npz", st)
+    with np.load(tmp_path / "v5.npz") as z:
+        assert int(z["format_version"]) == 5 and float(z["ctrl_g_held"]) == c.g_held
+        d = {k: z[k] for k in z.files if k != "ctrl_g_held"}
+    assert io.load_state(tmp_path / "v5.npz")[0].control == c
+    np.savez(tmp_path / "bad.npz", **d)                    # version 5 must carry it
+    with pytest.raises(ValueError, match="ctrl_g_held"):
+        io.load_state(tmp_path / "bad.npz")
 
 
 @pytest.mark.parametrize("bad", [0.0, -1.0, math.nan, math.inf])

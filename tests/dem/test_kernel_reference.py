@@ -130,13 +130,15 @@ def _kernel_steps(s, nsteps, kn, kt, mu, cap_on, beta, kr, mur, damping, nblocks
         kernels.wall_forces(ref.x, ref.v, ref.r, ref.m, ref.walls, ref.pairs.cand_off,
                             ref.pairs.cand, fext, kn, beta, np.zeros(4), np.zeros(4),
                             np.zeros((2, 0)))
-        kernels.advance(1, s.x, s.v, s.w, s.theta, s.r, s.m, s.inertia, pl.pi, pl.pj, pl.ft,
-                        pl.mr, pl.cand_off, pl.cand, s.fext, s.fnet, s.x_ref, s.walls_ref,
-                        s.disp2, s.walls, s.prev, s.wF, s.wK, mode, zero2, zero2, 0, 0, rate,
-                        len0, step, kn, kt, mu, cap_on, beta, kr, mur, damping, s.dt,
-                        p.thickness, p.servo_gain, p.servo_smoothing, p.servo_vmax,
-                        0.5 * p.skin, nblocks, 0.0, 0.0, np.zeros(0), np.zeros((6, 0)),
-                        np.zeros((0, 3)))
+        kernels.advance(1, tuple(kernels.Disks(s.x, s.v, s.w, s.theta, s.r, s.m, s.inertia,
+                                               s.fext, s.fnet, s.x_ref, s.disp2)), tuple(pl),
+                        tuple(kernels.WallState(s.walls, s.walls_ref, s.prev, s.wF, s.wK)),
+                        tuple(kernels.Servo(mode, zero2, zero2, 0, 0, rate, len0, 0.0, 0.0, 0.0,
+                                            p.thickness, p.servo_gain, p.servo_smoothing,
+                                            p.servo_vmax)),
+                        tuple(kernels.Law(kn, kt, mu, cap_on, beta, kr, mur, damping, s.dt)),
+                        step, 0.5 * p.skin, nblocks,
+                        (np.zeros(0), np.zeros((6, 0)), np.zeros((0, 3))))
         capped.append(_reference_step(ref, ref_ft, ref_mr, fext, kn, kt, mu, cap_on, beta, kr,
                                       mur, damping, s.dt))
         ref.walls[:] = s.walls        # the servo moved them by a prescribed rate

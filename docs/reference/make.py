@@ -137,6 +137,10 @@ def _record_classes():
 
 
 _RANGES = {}
+# fields a record holds but checks elsewhere: the weak zone's phi_g and alpha0 are checked by
+# fem.__main__.check_config through the weak zone's HParams
+CHECKED_AS = {("BiaxialConfig", "imp_phi_g"): ("HParams", "phi_g", ", or none"),
+              ("BiaxialConfig", "imp_alpha0"): ("HParams", "alpha0", ", or none")}
 
 
 def record_range(record, field):
@@ -144,6 +148,11 @@ def record_range(record, field):
     out of any plausible range; None if it refuses none of them (any value)."""
     key = (record, field)
     if key in _RANGES:
+        return _RANGES[key]
+    if key in CHECKED_AS:
+        rec, fld, more = CHECKED_AS[key]
+        rng = record_range(rec, fld)
+        _RANGES[key] = rng and rng + more
         return _RANGES[key]
     cls = _record_classes().get(record)
     found = None
@@ -164,9 +173,27 @@ def record_range(record, field):
                 m = re.search(r"allowed(?: range)?:?\s+(.*)$", str(e))
                 if m:
                     found = _value_text(re.sub(r"\s*\[[^\]]*\]", "", m.group(1)).strip(), field)
+                    found = _options_in(found, record, cls, field)
                     break
     _RANGES[key] = found
     return found
+
+
+def _options_in(text, record, cls, field):
+    """The record's other fields named in a range ("0 < value < norm") as their options
+    ("0 < value < --stress-norm")."""
+    from hmodel.options import option_of
+    names = ([f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls)
+             else list(getattr(cls, "_fields", ())))
+    for other in names:
+        if other == field:
+            continue
+        o = re.escape(other)
+        # a field's name (with an underscore), or a word beside a comparison: not prose
+        pat = (rf"(?<![\w-]){o}\b" if "_" in other else
+               rf"(?<=[<>=] ){o}\b|(?<![\w-]){o}(?= [<>=])")
+        text = re.sub(pat, option_of(record, other), text)
+    return text
 
 
 def _field_default(cls, field):
@@ -222,7 +249,8 @@ def options(slug, parser, notes) -> list:
             name = ref["name"] if ref else max(a.option_strings, key=len)
             flags = " / ".join(a.option_strings)
             if a.nargs != 0 and not isinstance(a, argparse.BooleanOptionalAction):
-                flags += f" {a.metavar or a.dest.upper()}"
+                fmt = argparse.HelpFormatter("")           # the metavar as --help shows it
+                flags += " " + fmt._format_args(a, fmt._get_default_metavar_for_optional(a))
             title = group.title if group.title not in ("options", "optional arguments") else ""
             if ref is None or name not in VOCABULARY:
                 unit, text = notes.get(name, (None, None))
@@ -614,14 +642,19 @@ def render(slug, cmds, gl, gaps) -> str:
         if sources:
             intro += " (from the code: " + ", ".join(f"`{s}`" for s in sources) + ")"
         L += [intro + ":", "", f"| {head} | unit | meaning |", "|---|---|---|"]
+        rows = []           # [names, unit, text]: columns next to each other with one entry
         for c in cols:
             try:
                 unit, text = describe(c, f, part, gl, code_units, where)
             except Gap as e:
                 gaps.append(str(e))
                 continue
-            opt_text = " (optional)" if c.optional else ""
-            L.append(f"| `{c.name}`{opt_text} | {_cell(unit)} | {_cell(text)} |")
+            name = f"`{c.name}`" + (" (optional)" if c.optional else "")
+            if rows and rows[-1][1:] == [unit, text]:
+                rows[-1][0].append(name)
+            else:
+                rows.append([[name], unit, text])
+        L += [f"| {', '.join(n)} | {_cell(u)} | {_cell(t)} |" for n, u, t in rows]
         extra = set(f.entries) - {c.name for c in cols}
         if extra and (what or f.entries):
             gaps.append(f"{where}: described but not among its {what or 'columns'}: "

@@ -182,7 +182,7 @@ def record_range(record, field):
 def _options_in(text, record, cls, field):
     """The record's other fields named in a range ("0 < value < norm") as their options
     ("0 < value < --stress-norm")."""
-    from hmodel.options import option_of
+    from hmodel.options import VOCABULARY, option_of
     names = ([f.name for f in dataclasses.fields(cls)] if dataclasses.is_dataclass(cls)
              else list(getattr(cls, "_fields", ())))
     for other in names:
@@ -192,7 +192,11 @@ def _options_in(text, record, cls, field):
         # a field's name (with an underscore), or a word beside a comparison: not prose
         pat = (rf"(?<![\w-]){o}\b" if "_" in other else
                rf"(?<=[<>=] ){o}\b|(?<![\w-]){o}(?= [<>=])")
-        text = re.sub(pat, option_of(record, other), text)
+        opt_name = option_of(record, other)
+        if opt_name not in VOCABULARY:          # no option: the record's field and its default
+            d = _field_default(cls, other)
+            opt_name = f"{other} ({d:g})" if isinstance(d, (int, float)) else other
+        text = re.sub(pat, opt_name, text)
     return text
 
 
@@ -235,6 +239,20 @@ def _home(text):
     return text.replace(home, "~") if home not in ("", "/") else text
 
 
+def _parser_range(action) -> str:
+    """What the option's own type allows, as its error says ("value >= 1"), or ""."""
+    if not callable(action.type):
+        return ""
+    try:
+        action.type("?")
+    except argparse.ArgumentTypeError as e:
+        m = re.search(r"allowed (?:a finite |an integer )?(.*?)(?: \[[^\]]*\])?$", str(e))
+        return m.group(1) if m else ""
+    except (TypeError, ValueError):
+        return ""
+    return ""
+
+
 def options(slug, parser, notes) -> list:
     """The options of a command's parser (groups in --help's order), each from the vocabulary's
     term and what the command's call to ``add`` gave it; ``notes``: the page's own text for
@@ -259,8 +277,12 @@ def options(slug, parser, notes) -> list:
                               "(hmodel.options.add) and the page's source does not describe it "
                               "(a line '- `{name}` [unit]: what it is' under '## Options')")
                 default = "off" if a.nargs == 0 else _home(str(a.default))
-                out.append(Option(flags, name, "switch" if a.nargs == 0 else "", unit, "",
-                                  "required" if a.required else default, text, title))
+                kind = ("switch" if a.nargs == 0 else unit if unit in ("path", "text") else
+                        {"integer": "integer", "real": "number", "reals": "numbers, "
+                         "comma-separated"}.get(getattr(a.type, "__name__", ""), "text"))
+                out.append(Option(flags, name, kind, "" if unit in ("path", "text") else unit,
+                                  _parser_range(a), "required" if a.required else default,
+                                  text, title))
                 continue
             t = VOCABULARY[name]
             record = ref.get("record")

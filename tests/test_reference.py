@@ -97,6 +97,11 @@ def test_links_of_the_pages_exist(built):
                 continue
             path = (REF / target.split("#")[0]).resolve()
             assert path.exists(), f"docs/reference/{name} links to {target}, which does not exist"
+            if "#" in target and path.suffix == ".md":
+                text_ = pages.get(path.name) if path.parent == REF else path.read_text()
+                heads = {MAKE.anchor(h) for h in re.findall(r"^#+ (.+)$", text_, re.M)}
+                assert target.split("#")[1] in heads, (
+                    f"docs/reference/{name} links to {target}: no such heading there")
 
 
 # -- the examples ---------------------------------------------------------------------------

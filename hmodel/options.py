@@ -365,10 +365,10 @@ VOCABULARY = {t.name: t for t in (
     # -- the burst experiment (docs/burst.md) ----------------------------------------------------
     _T("--ratios", "comma-separated R of the proportional strain paths d eps2 = R d eps1, each "
        "finite and < 0 (-1: isochoric)", "-", "reals", fields=("BurstConfig.ratios",),
-       old=(("--burst-ratios", ("dem crosscheck",)),)),
+       old=(("--burst-ratios", ("crosscheck",)),)),
     _T("--start-fractions", "comma-separated start states, fractions f of the drained peak eta",
        "-", "reals", 0, 1, hi_open=False, fields=("BurstConfig.start_fractions",),
-       old=(("--burst-fractions", ("dem crosscheck",)),)),
+       old=(("--burst-fractions", ("crosscheck",)),)),
     _T("--dc", "step of c = s1 + R s2 held after the switch (dG = B dc per unit thickness)",
        "Pa", "real", 0, None, False, fields=("BurstConfig.dc", "BurstOptions.dc")),
     _T("--path-strain", "largest axial strain of a proportional path from its start", "-",
@@ -443,7 +443,7 @@ VOCABULARY = {t.name: t for t in (
     _T("--no-fields", "no fields.xdmf / fields.h5", None, "flag"),
     _T("--n-sphere", "strain directions sampled for the local minimum of W2", "-", "int",
        fields=("BiaxialConfig.n_sphere",)),
-    # -- dem bench, calibrate, crosscheck ------------------------------------------------------
+    # -- dem bench, calibrate; crosscheck ------------------------------------------------------
     _T("--steps", "time steps measured", "steps", "int", 1, None, False),
     _T("--rounds", "interleaved rounds of the measurement", "-", "int", 1, 100, False, False),
     _T("--busy-core", "measure beside a busy-loop process (a shared machine)", None, "flag"),

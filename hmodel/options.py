@@ -755,6 +755,8 @@ def _grouped(paths) -> list:
 # -- whose folder: every command that writes a folder records itself there -------------------
 OWNER_FILE = "command.json"
 _SNAPSHOT_MAX = 20_000      # files listed at most (a DEM folder holds a few thousand)
+# commands that moved (issue 33): a folder the former one wrote is the new one's (its --resume)
+RENAMED_COMMANDS = {"python -m dem crosscheck": "python -m crosscheck"}
 
 
 def snapshot(path) -> dict:
@@ -778,13 +780,14 @@ def snapshot(path) -> dict:
 def folder_owner(path):
     """The command that wrote the folder ``path`` ("python -m dem biaxial"): its command.json,
     else the note of its params.json (every command's starts with the command: folders written
-    before command.json), else None (no record: a folder of no command, or empty)."""
+    before command.json), else None (no record: a folder of no command, or empty). A command
+    that moved is named as it is now (``RENAMED_COMMANDS``)."""
     import json
     try:
         with open(os.path.join(path, OWNER_FILE)) as f:
             c = json.load(f).get("command")
         if isinstance(c, str) and c:
-            return c
+            return RENAMED_COMMANDS.get(c, c)
     except (OSError, ValueError, AttributeError):
         pass
     try:

@@ -45,3 +45,19 @@ def test_the_new_commands_help(capsys):
     out = capsys.readouterr().out
     assert e.value.code == 0 and out.startswith("usage: python -m crosscheck ")
     assert "report.md" in out and "--out is required" in out and "python -m crosscheck.fit" in out
+
+
+def test_a_folder_of_the_former_command_is_the_new_ones(tmp_path):
+    """A run of `python -m dem crosscheck` (its command.json) is resumed by `python -m
+    crosscheck` without --force; another command's folder is refused as before."""
+    import json
+
+    from hmodel.options import OptionError, check_owner, folder_owner
+    old, other = tmp_path / "old", tmp_path / "other"
+    for d, command in ((old, "python -m dem crosscheck"), (other, "python -m dem biaxial")):
+        d.mkdir()
+        (d / "command.json").write_text(json.dumps({"command": command}))
+    assert folder_owner(old) == "python -m crosscheck"
+    check_owner(old, "python -m crosscheck")
+    with pytest.raises(OptionError, match="the output folder of python -m dem biaxial"):
+        check_owner(other, "python -m crosscheck")

@@ -1,7 +1,7 @@
 """What a finished DEM directional analysis would take on N workers (a dask cluster, or more
 local processes), from that run's own step counts and wall time.
 
-The relaxations and probe runs of `python -m dem crosscheck` and `python -m dem domain` are
+The relaxations and probe runs of `python -m crosscheck` and `python -m dem domain` are
 independent one-thread runs handed out in three waves (the relaxations, then the elastic runs,
 then the sliding runs, which need their elastic strain), each run to the first worker free
 (`dem.domain.makespan`). The steps per second of one worker are calibrated on the run itself:

@@ -1,5 +1,7 @@
-"""Command line: python -m dem {biaxial, probes, domain, burst, params, bench, calibrate,
-crosscheck} (over the library), its options from the vocabulary of ``hmodel.options``."""
+"""Command line: python -m dem {biaxial, probes, domain, burst, params, bench, calibrate} (over
+the library), its options from the vocabulary of ``hmodel.options``. The cross-check of the
+three parts moved above them (``python -m crosscheck``, issue 33): ``python -m dem crosscheck``
+answers in one line where it went (``MOVED``)."""
 from __future__ import annotations
 
 import argparse
@@ -173,8 +175,9 @@ def cmd_domain(a):
           f"wall time {time.time() - t0:.1f} s")
 
 
-def _ratios(text):
-    """argparse type of --ratios: comma-separated R < 0 (R = 0, R > 0, not finite: why not)."""
+def parse_ratios(text):
+    """argparse type of --ratios: comma-separated R < 0 (R = 0, R > 0, not finite: why not);
+    also ``python -m crosscheck``'s."""
     from .burst import check_ratio
     try:
         vals = [float(x) for x in text.split(",") if x.strip()]
@@ -274,23 +277,9 @@ def cmd_calibrate(a):
           f"calibration.png; wall time {time.time() - t0:.1f} s")
 
 
-def cmd_crosscheck(a):
-    from .crosscheck import run_crosscheck
-    t0 = time.time()
-    c, timings = run_crosscheck(a.out, full=a.full, n=a.n, seed=a.seed, rate=a.rate,
-                                workers=a.workers, skip_dem=a.no_dem, domain=not a.no_domain,
-                                dem_max_steps=a.max_steps, threads=a.threads, resume=a.resume,
-                                dem_domain=a.dem_domain, dem_params=a.dem_params,
-                                scheduler=a.scheduler, hmodel_params=a.hmodel_params,
-                                burst=not a.no_burst, burst_ratios=a.ratios,
-                                burst_fractions=a.start_fractions, verbose=not a.quiet)
-    print(open(os.path.join(a.out, "report.md")).read().split("## The paper's conclusions")[1])
-    print(f"crosscheck: report {os.path.join(a.out, 'report.md')}; wall time {time.time() - t0:.1f} s")
-
-
 DESCRIPTION = """The compact 2D DEM (Numba) and the paper's DEM experiment: a sample compacted and
 tested in drained biaxial compression, stress probes and the bifurcation domain, the burst, the
-calibration against the H-model, the cross-check of the three parts.
+calibration against the H-model (the cross-check of the three parts: python -m crosscheck).
 python -m dem COMMAND --help lists a command's options, each with its unit and default. --out is
 required: a folder (the parameter file for params) that records the command that wrote it
 (command.json); another command refuses that folder unless --force."""
@@ -394,7 +383,7 @@ def build_parser() -> opt.Parser:
     add(u, "--biaxial", required=True, metavar="DIR")
     opt.add_out(u)
     g = u.add_argument_group("the paths and the switch")
-    add(g, "--ratios", [-2.0], parse=_ratios)
+    add(g, "--ratios", [-2.0], parse=parse_ratios)
     add(g, "--start-fractions", [0.9], note="among those dem biaxial --save-fractions saved")
     add(g, "--dc", 100.0, record=BO, note="dG = W t dc")
     add(g, "--rate", 0.01, record=BO, note="of the path")
@@ -480,32 +469,6 @@ def build_parser() -> opt.Parser:
     add(g, "--resume", note="every evaluation in --out/evaluations.jsonl is taken")
     opt.add_quiet(g)
     k.set_defaults(func=cmd_calibrate)
-
-    x = sub.add_parser("crosscheck", help="H-model, FE and DEM side by side (report.md + figures)")
-    opt.add_out(x)
-    add(x, "--dem-params", metavar="FILE", default_text="the paper's stated set")
-    add(x, "--hmodel-params", metavar="FILE", default_text="Table I; both at 200 kPa, the FE at "
-        "72 orientations")
-    add(x, "--full")
-    add(x, "--n", default_text="1000, 12000 with --full", note="of the DEM sample")
-    add(x, "--seed", 1, note="of the DEM sample")
-    add(x, "--rate", default_text="0.05, 0.01 with --full", note="of the DEM's biaxial test")
-    add(x, "--max-steps", default_text="the probes'", note="of each DEM probe run")
-    add(x, "--workers", default_text="the cores", note="for the DEM's relaxations and probes")
-    add(x, "--scheduler", default_text="none (local processes)",
-        note="for the DEM's relaxations and probes (one task a run)")
-    add(x, "--no-dem")
-    add(x, "--no-domain")
-    add(x, "--threads", default_text="auto (dem.threads)",
-        note="of the DEM compaction, biaxial test and relaxations")
-    add(x, "--resume", note="the DEM work an interrupted run left in --out/dem")
-    add(x, "--dem-domain", default_text="on, off with --full (use dem domain there)")
-    add(x, "--no-burst")
-    add(x, "--ratios", parse=_ratios, note="of the burst section", default_text="-2")
-    add(x, "--start-fractions", note="of the burst section, of each part's drained peak eta, "
-        "among the DEM's saved ones", default_text="0.9")
-    opt.add_quiet(x)
-    x.set_defaults(func=cmd_crosscheck)
     return ap
 
 
@@ -527,7 +490,50 @@ def check_state(path, option="--state"):
         raise opt.OptionError(f"{option} {path}: {why}; allowed {STATE_FILE}") from None
 
 
+def check_run_options(a):
+    """--workers or --scheduler (not both; the scheduler's address reachable, dask.distributed
+    installed) and --threads, before anything runs: the DEM commands' and python -m crosscheck's."""
+    if getattr(a, "scheduler", None) and getattr(a, "workers", None):
+        raise opt.OptionError("--workers and --scheduler: allowed one of them")
+    if getattr(a, "scheduler", None):
+        from .probes import check_scheduler
+        check_scheduler(a.scheduler)
+    if getattr(a, "threads", None) is not None:
+        from .threads import check_threads
+        check_threads(a.threads)
+
+
+def compile_kernels_once():
+    """Compile the DEM kernels now if Numba has none cached (saying so in one line, and how long
+    it took), so that a command's own timers leave the compilation out."""
+    from . import kernels
+    if opt.announce_compilation([kernels.advance, kernels.build_pairs, kernels.contact_snapshot]):
+        from .simulation import compile_kernels
+        t = time.time()
+        compile_kernels()
+        print(f"compiled in {time.time() - t:.1f} s", file=sys.stderr, flush=True)
+
+
+# commands that moved out of python -m dem: one line says where (exit 2)
+MOVED = {"crosscheck": "python -m crosscheck"}
+
+
+def moved_line(argv) -> str | None:
+    """The line that answers a command of ``MOVED`` (the first word of ``argv`` that is no
+    option), or None."""
+    word = next((w for w in argv if not w.startswith("-")), None)
+    if word not in MOVED:
+        return None
+    return (f"error: python -m dem {word} moved to {MOVED[word]}, with the same options "
+            f"(see {MOVED[word]} --help)")
+
+
 def main(argv=None):
+    line = moved_line(sys.argv[1:] if argv is None else argv)
+    if line:
+        print(line, file=sys.stderr)
+        sys.exit(2)
+
     def run(a, stage):
         if a.cmd == "params":
             opt.check_out_file(a.out)
@@ -541,19 +547,7 @@ def main(argv=None):
             _params(a)
         elif getattr(a, "params", None):     # probes, domain: compared with the states' later
             load_params(a.params)
-        if getattr(a, "dem_params", None):
-            load_params(a.dem_params, option="--dem-params")
-        if getattr(a, "hmodel_params", None):
-            from hmodel.params import load_params as load_hparams
-            load_hparams(a.hmodel_params, option="--hmodel-params")
-        if getattr(a, "scheduler", None) and getattr(a, "workers", None):
-            raise opt.OptionError("--workers and --scheduler: allowed one of them")
-        if getattr(a, "scheduler", None):
-            from .probes import check_scheduler
-            check_scheduler(a.scheduler)
-        if getattr(a, "threads", None) is not None:
-            from .threads import check_threads
-            check_threads(a.threads)
+        check_run_options(a)
         if getattr(a, "directions", None):
             _directions(a)            # bad input before the compilation
         if a.cmd in ("probes", "domain"):
@@ -566,12 +560,6 @@ def main(argv=None):
                 raise opt.record_error(e, "DemParams") from None
         if getattr(a, "state", None):
             check_state(a.state)      # a missing or foreign state file, before the compilation
-        if a.cmd == "crosscheck" and not a.no_burst:
-            from .experiment import SAVE_FRACTIONS
-            bad = [f for f in a.start_fractions or () if f not in SAVE_FRACTIONS]
-            if bad and not a.no_dem:
-                raise opt.OptionError(f"--start-fractions {bad}: allowed fractions the DEM's "
-                                      f"biaxial test saves, {list(SAVE_FRACTIONS)}")
         if getattr(a, "biaxial", None):
             opt.check_folder(a.biaxial, "--biaxial", BIAXIAL_FOLDER, ("python -m dem biaxial",))
         if a.cmd == "burst":
@@ -587,13 +575,8 @@ def main(argv=None):
             load_states(a.biaxial, [s for s in (getattr(a, "states", None) or "").split(",") if s])
         stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"
                                    if hasattr(a, "resume") else ""))
-        from . import kernels
-        if a.cmd != "params" and opt.announce_compilation([kernels.advance, kernels.build_pairs,
-                                                           kernels.contact_snapshot]):
-            from .simulation import compile_kernels
-            t = time.time()
-            compile_kernels()         # before the command's own timers start
-            print(f"compiled in {time.time() - t:.1f} s", file=sys.stderr, flush=True)
+        if a.cmd != "params":
+            compile_kernels_once()    # before the command's own timers start
         a.stage = stage           # a command may say where it is (dem calibrate)
         a.func(a)
         return 0

@@ -2,7 +2,10 @@
 over ``hmodel.experiment``, ``hmodel.burst``, ``hmodel.fit`` and ``hmodel.plots``). The model
 parameters of every command: ``--params FILE`` and the options of ``options.add_param_options``,
 read by ``options.params_from``; every output folder records them in params.json
-(docs/parameters.md)."""
+(docs/parameters.md). The files of fit, probes and domain are written by ``write_fit``,
+``write_probes`` and ``write_domain`` from an HParams record and the library's results, so that
+a caller with its own record (``python -m crosscheck.fit``) writes the same folders without an
+argv."""
 from __future__ import annotations
 
 import argparse
@@ -19,11 +22,11 @@ from . import options as opt
 from . import plots
 from .driver import MixedControlError
 from .experiment import (DOMAIN_COLUMNS, DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test,
-                         bifurcation_domain, compile_kernels, probe_columns, state_at_eta)
+                         bifurcation_domain, compile_kernels, directional_analysis, probe_columns)
 from .io import atomic_open, fmt, json_safe, write_csv, write_table
 from .options import add_param_options, params_from, record_params
 from .params import ParamError, save_params
-from .probes import arcs, directional_sweep, format_arcs, stress_probes, tangent_criteria
+from .probes import arcs, format_arcs
 
 # where a loss of the static solution is made to happen dynamically
 BURST_POINTER = ("held past such a point the specimen cannot stay at rest: python -m hmodel burst "
@@ -132,37 +135,55 @@ def cmd_probes(args, stage):
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
     t0 = _start(args, stage, f"drained path to point A (eta = {args.eta_a:g}), sigma2 = {P.p0:g} Pa")
-    r, sA = state_at_eta(P, args.eta_a, P.p0, args.d_eps1)
-    _say(stage, f"strain probes at A: {args.n_probes} directions, refined where the response jumps")
-    sw = directional_sweep(sA, P, n=args.n_probes, norm=args.strain_norm)
-    _say(stage, f"stress probes every {args.stress_step:g} deg ({len(sw.alpha_eps)} strain probes done)")
-    targets = np.arange(0.0, 360.0, args.stress_step)
-    sp = stress_probes(sA, P, targets, sigma_norm=args.stress_norm, sweep=sw)
-    tc = tangent_criteria(sA, P)
+    da = directional_analysis(P, args.eta_a, args.d_eps1, args.n_probes, args.strain_norm,
+                              args.stress_step, args.stress_norm, progress=lambda m: _say(stage, m))
+    tc = da.tangent
     t_run = time.time() - t0
     _say(stage, "writing probes.csv, stress_probes.csv, Figs. 3, 6-9, 11 and summary.json")
-    os.makedirs(args.out, exist_ok=True)
-    write_csv(os.path.join(args.out, "probes.csv"), probe_columns(sw))
-    stage.wrote("probes.csv", record_params(args.out, P, f"python -m hmodel probes; {args.params_note}"))
+    summary = write_probes(args.out, P, args.eta_a, da, args.params_note, stage)
+    print(args.params_note)
+    print(f"point A: eta = {summary['eta_A']:.4f} at eps1 = {summary['eps1_A']:.4%} "
+          f"({summary['n_probes']} strain probes, {t_run:.2f} s)")
+    print(f"plastic tensorial zone (alpha_sigma, deg): {format_arcs(summary['plastic_zone_alpha_sigma'])}")
+    print(f"instability cone W2 <= 0: {format_arcs(summary['cone_w2_alpha_sigma'])}; "
+          f"W2_sigma <= 0: {format_arcs(summary['cone_w2sigma_alpha_sigma'])}")
+    print(f"min W2 = {summary['min_w2']:.4f} at alpha_sigma = {summary['alpha_sigma_min_w2']:.2f} deg; "
+          f"min W2n = {summary['min_w2n']:.4f}")
+    print(f"det(M) = {tc['det_M_cauchy']:.4g}, det(M_sym) = {tc['det_Msym_cauchy']:.4g} (Cauchy, loading pattern)")
+    print(f"wrote {args.out}/probes.csv, stress_probes.csv, summary.json, params.json and Figs. 3, 6-9, 11")
+
+
+def write_probes(out, P, eta_a, da, note, stage=None) -> dict:
+    """The files of a directional analysis at A (``experiment.directional_analysis`` of the
+    material ``P`` at ``eta_a``) in the folder ``out`` (created): probes.csv, stress_probes.csv,
+    params.json (``P``), Figs. 3, 6-9, 11 and summary.json, whose "parameters" is ``note`` (where
+    the values came from). Returns the summary; ``stage`` (an ``options.Stage``) hears of each
+    file written."""
+    stage = stage or opt.Stage()
+    sw, targets, sp, tc = da.sweep, da.targets, da.stress, da.tangent
+    os.makedirs(out, exist_ok=True)
+    write_csv(os.path.join(out, "probes.csv"), probe_columns(sw))
+    stage.wrote("probes.csv", record_params(out, P, f"python -m hmodel probes; {note}"))
     cols = {"alpha_sigma_target": targets, "n_solutions": sp.n_solutions}
     cols.update({k: v for k, v in probe_columns(sp.probe).items()})
-    write_csv(os.path.join(args.out, "stress_probes.csv"), cols)
+    write_csv(os.path.join(out, "stress_probes.csv"), cols)
     stage.wrote("stress_probes.csv")
-    pth = lambda n: os.path.join(args.out, n)
+    pth = lambda n: os.path.join(out, n)
     plots.fig_probes(sw, pth("fig3_probes.png"))
     plots.fig_stress_components(sw, 0, pth("fig6_axial_components.png"))
     plots.fig_stress_components(sw, 1, pth("fig7_lateral_components.png"))
     plots.fig_polar_w2([("H-model W2", sw.alpha_sigma, sw.w2, "C0-")], pth("fig8_polar_w2.png"),
-                       title=f"Normalized second-order work at A ($\\eta$ = {args.eta_a}) (Fig. 8)",
+                       title=f"Normalized second-order work at A ($\\eta$ = {eta_a}) (Fig. 8)",
                        cone=arcs(sw.alpha_sigma, sw.w2 <= 0), plastic=arcs(sw.alpha_sigma, sw.plastic),
                        no_solution=targets[sp.n_solutions == 0])
     plots.fig_w2_split(sw, pth("fig9_w2_split.png"))
     plots.fig_w2_normal_tangential(sw, pth("fig11_w2_normal_tangential.png"),
                                    title="H-model: normal and tangential parts of W2 (Fig. 11)")
     stage.wrote("Figs. 3, 6-9, 11")
+    r = da.path
     p, q, eta = r.invariants()
     summary = {
-        "parameters": args.params_note, "sigma2": P.p0, "eta_A": float(eta[-1]), "eps1_A": float(r.eps[-1, 0]),
+        "parameters": note, "sigma2": P.p0, "eta_A": float(eta[-1]), "eps1_A": float(r.eps[-1, 0]),
         "p_A": float(p[-1]), "q_A": float(q[-1]), "n_probes": int(len(sw.alpha_eps)),
         "plastic_zone_alpha_sigma": arcs(sw.alpha_sigma, sw.plastic),
         "cone_w2_alpha_sigma": arcs(sw.alpha_sigma, sw.w2 <= 0),
@@ -178,16 +199,7 @@ def cmd_probes(args, stage):
     with atomic_open(pth("summary.json")) as f:
         json.dump(summary, f, indent=2)
     stage.wrote("summary.json")
-    print(args.params_note)
-    print(f"point A: eta = {summary['eta_A']:.4f} at eps1 = {summary['eps1_A']:.4%} "
-          f"({summary['n_probes']} strain probes, {t_run:.2f} s)")
-    print(f"plastic tensorial zone (alpha_sigma, deg): {format_arcs(summary['plastic_zone_alpha_sigma'])}")
-    print(f"instability cone W2 <= 0: {format_arcs(summary['cone_w2_alpha_sigma'])}; "
-          f"W2_sigma <= 0: {format_arcs(summary['cone_w2sigma_alpha_sigma'])}")
-    print(f"min W2 = {summary['min_w2']:.4f} at alpha_sigma = {summary['alpha_sigma_min_w2']:.2f} deg; "
-          f"min W2n = {summary['min_w2n']:.4f}")
-    print(f"det(M) = {tc['det_M_cauchy']:.4g}, det(M_sym) = {tc['det_Msym_cauchy']:.4g} (Cauchy, loading pattern)")
-    print(f"wrote {args.out}/probes.csv, stress_probes.csv, summary.json, params.json and Figs. 3, 6-9, 11")
+    return summary
 
 
 def cmd_burst(args, stage):
@@ -459,28 +471,15 @@ def cmd_domain(args, stage):
     _check_path(args, DOMAIN_EPS1_MAX)
     _check_probes(args, P)
     t0 = _start(args, stage, f"bifurcation domain at sigma2 = {', '.join(f'{s:g}' for s in pressures)} Pa")
-
-    def write_rows(pts):
-        os.makedirs(args.out, exist_ok=True)
-        cols = {k: np.array([getattr(d, k) for d in pts]) for k in DOMAIN_COLUMNS}
-        write_csv(os.path.join(args.out, "domain.csv"), cols)
-        stage.wrote(f"domain.csv ({len(pts)} of {len(pressures)} pressures)" if len(pts) < len(pressures)
-                    else "domain.csv", record_params(args.out, P, f"python -m hmodel domain; {note}"))
-
     try:
         pts = bifurcation_domain(P, pressures, workers=args.workers, d_eps1=args.d_eps1,
                                  n_dir_probe=args.n_probes, progress=lambda m: _say(stage, m))
     except BaseException as e:
         if getattr(e, "partial", None):     # interrupted: the pressures finished stay
-            write_rows(e.partial)
+            write_domain_rows(args.out, P, e.partial, len(pressures), note, stage)
         raise
     t_run = time.time() - t0
-    write_rows(pts)
-    with atomic_open(os.path.join(args.out, "summary.json")) as f:
-        json.dump(json_safe({"parameters": note, "paths": [
-            {"sigma2": d.sigma2, "outcome": d.outcome, "end": d.end or None} for d in pts]}), f, indent=1)
-    stage.wrote("summary.json")
-    plots.fig_domain(pts, os.path.join(args.out, "fig10_domain.png"))
+    write_domain(args.out, P, pts, note, stage)
     print(note)
     pq = lambda p, q: (f"(p, q) = ({p:.4g}, {q:.4g}) Pa" if np.isfinite(p) else "never before the peak")
     for d in pts:
@@ -489,6 +488,31 @@ def cmd_domain(args, stage):
         if d.outcome != "complete":
             print(f"  the drained path at {d.sigma2:g} Pa ends {d.end}")
     print(f"wrote {args.out}/domain.csv, params.json, summary.json, fig10_domain.png ({t_run:.1f} s)")
+
+
+def write_domain_rows(out, P, pts, n_pressures, note, stage=None):
+    """domain.csv of the domain points ``pts`` (``experiment.bifurcation_domain``: ``n_pressures``
+    asked for, all of them or those finished) and params.json (``P``, with ``note``: where the
+    values came from) in the folder ``out`` (created)."""
+    stage = stage or opt.Stage()
+    os.makedirs(out, exist_ok=True)
+    cols = {k: np.array([getattr(d, k) for d in pts]) for k in DOMAIN_COLUMNS}
+    write_csv(os.path.join(out, "domain.csv"), cols)
+    stage.wrote(f"domain.csv ({len(pts)} of {n_pressures} pressures)" if len(pts) < n_pressures
+                else "domain.csv", record_params(out, P, f"python -m hmodel domain; {note}"))
+
+
+def write_domain(out, P, pts, note, stage=None):
+    """The files of a bifurcation domain (``experiment.bifurcation_domain`` of the material
+    ``P``) in the folder ``out`` (created): domain.csv, params.json, summary.json (its
+    "parameters": ``note``) and Fig. 10."""
+    stage = stage or opt.Stage()
+    write_domain_rows(out, P, pts, len(pts), note, stage)
+    with atomic_open(os.path.join(out, "summary.json")) as f:
+        json.dump(json_safe({"parameters": note, "paths": [
+            {"sigma2": d.sigma2, "outcome": d.outcome, "end": d.end or None} for d in pts]}), f, indent=1)
+    stage.wrote("summary.json")
+    plots.fig_domain(pts, os.path.join(out, "fig10_domain.png"))
 
 
 def cmd_fit(args, stage):
@@ -522,16 +546,34 @@ def cmd_fit(args, stage):
                          w_epsv=args.w_epsv, d_eps1=args.d_eps1, d_eps1_search=args.d_eps1_search,
                          max_nfev=args.max_nfev, progress=lambda m: _say(stage, m))
     t_run = time.time() - t0
-    os.makedirs(args.out, exist_ok=True)
-    pth = lambda n: os.path.join(args.out, n)
+    write_fit(args.out, curve, res, f"python -m hmodel fit --data {args.data}: fitted "
+              f"{', '.join(args.free)}; {args.params_note}",
+              {k: v for k, v in vars(args).items() if k != "func"}, t_run, stage)
+    if res.status != "fitted":
+        print(f"not fittable: {res.reason}", file=sys.stderr)
+        print(f"wrote {args.out}/summary.json, fig_fit.png")
+        return 1
+    print(hfit.format_result(res, curve))
+    print(f"wrote {args.out}/params.json, fit.csv, residuals.csv, correlation.json, summary.json, "
+          f"fig_fit.png ({t_run:.1f} s)")
+    return 0
+
+
+def write_fit(out, curve, res, note, options=None, wall_time=None, stage=None) -> dict:
+    """The files of a fit (``fit.fit_curve``'s result ``res`` on the data ``curve``) in the
+    folder ``out`` (created): params.json (the fitted HParams, with ``note``: how they were
+    fitted), fit.csv, residuals.csv and correlation.json when it fitted; summary.json
+    (``fit.summary_dict`` with the run's ``options`` and ``wall_time`` [s]) and fig_fit.png
+    always. Returns the summary (what summary.json holds)."""
+    stage = stage or opt.Stage()
+    os.makedirs(out, exist_ok=True)
+    pth = lambda n: os.path.join(out, n)
     summary = hfit.summary_dict(res, curve)
-    summary["options"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()
-                          if k != "func"}
-    summary["wall_time_s"] = t_run
+    summary["options"] = {k: (list(v) if isinstance(v, tuple) else v)
+                          for k, v in (options or {}).items()}
+    summary["wall_time_s"] = wall_time
     if res.status == "fitted":
-        save_params(pth("params.json"), res.params,
-                    f"python -m hmodel fit --data {args.data}: fitted {', '.join(args.free)}; "
-                    f"{args.params_note}")
+        save_params(pth("params.json"), res.params, note)
         stage.wrote("params.json")
         cols = {"eps1": curve.eps1, "q": curve.q, "q_fit": res.model_q}
         rcols = {"eps1": curve.eps1, "r_q": res.residuals_q,
@@ -550,14 +592,7 @@ def cmd_fit(args, stage):
     stage.wrote("summary.json")
     hfit.plot_fit(curve, res, pth("fig_fit.png"))
     stage.wrote("fig_fit.png")
-    if res.status != "fitted":
-        print(f"not fittable: {res.reason}", file=sys.stderr)
-        print(f"wrote {args.out}/summary.json, fig_fit.png")
-        return 1
-    print(hfit.format_result(res, curve))
-    print(f"wrote {args.out}/params.json, fit.csv, residuals.csv, correlation.json, summary.json, "
-          f"fig_fit.png ({t_run:.1f} s)")
-    return 0
+    return summary
 
 
 def cmd_params(args, stage):

@@ -14,10 +14,11 @@ import numpy as np
 from .driver import PathResult, drained_biaxial, isotropic_state, run_path, stress_invariants
 from .material import HState
 from .params import HParams
-from .probes import ProbeResult, w2_vanishes
+from .probes import (DEFAULT_PROBE_NORM, ProbeResult, StressProbeResult, directional_sweep,
+                     stress_probes, tangent_criteria, w2_vanishes)
 
-__all__ = ["biaxial_test", "state_at_eta", "biaxial_columns", "probe_columns", "DomainPoint",
-           "DOMAIN_COLUMNS",
+__all__ = ["biaxial_test", "state_at_eta", "directional_analysis", "DirectionalAnalysis",
+           "biaxial_columns", "probe_columns", "DomainPoint", "DOMAIN_COLUMNS",
            "domain_point", "bifurcation_domain", "compile_kernels", "DOMAIN_EPS1_MAX"]
 
 # the axial strain where the searches for point A and for the domain boundaries give up [-]
@@ -99,6 +100,33 @@ def state_at_eta(params: HParams, eta: float, sigma2: float | None = None, d_eps
         why = "" if r.end.outcome == "complete" else f"; the path ends {r.end.line()}"
         raise ValueError(f"eta = {eta} is never reached on the drained path (max eta {e.max():.4f}{why})")
     return r, r.state
+
+
+class DirectionalAnalysis(NamedTuple):
+    """The directional analysis at point A (``directional_analysis``)."""
+    path: PathResult              # the drained path to A (its last state is A)
+    sweep: ProbeResult            # the adaptive strain-probe sweep at A
+    targets: np.ndarray           # the stress probes' directions alpha_sigma [deg]
+    stress: StressProbeResult     # the stress probes in those directions
+    tangent: dict                 # ``probes.tangent_criteria`` at A
+
+
+def directional_analysis(params: HParams, eta_a: float, d_eps1: float = 1e-5, n_probes: int = 360,
+                         strain_norm: float = DEFAULT_PROBE_NORM, stress_step: float = 5.0,
+                         stress_norm: float | None = 2.5e3, progress=None) -> DirectionalAnalysis:
+    """The directional analysis at point A (Figs. 3, 6-9, 11) of the material ``params`` at its
+    confining stress p0: the drained path to the first state with eta >= ``eta_a``, there an
+    adaptive sweep of ``n_probes`` strain probes of norm ``strain_norm``, stress probes every
+    ``stress_step`` [deg] scaled to ``stress_norm`` [Pa], and the tangent's criteria.
+    ``progress``: None or a callable taking one line of text before each stage."""
+    say = progress or (lambda m: None)
+    r, s_a = state_at_eta(params, eta_a, params.p0, d_eps1)
+    say(f"strain probes at A: {n_probes} directions, refined where the response jumps")
+    sw = directional_sweep(s_a, params, n=n_probes, norm=strain_norm)
+    say(f"stress probes every {stress_step:g} deg ({len(sw.alpha_eps)} strain probes done)")
+    targets = np.arange(0.0, 360.0, stress_step)
+    sp = stress_probes(s_a, params, targets, sigma_norm=stress_norm, sweep=sw)
+    return DirectionalAnalysis(r, sw, targets, sp, tangent_criteria(s_a, params))
 
 
 def biaxial_columns(r: PathResult) -> dict:

@@ -365,10 +365,10 @@ VOCABULARY = {t.name: t for t in (
     # -- the burst experiment (docs/burst.md) ----------------------------------------------------
     _T("--ratios", "comma-separated R of the proportional strain paths d eps2 = R d eps1, each "
        "finite and < 0 (-1: isochoric)", "-", "reals", fields=("BurstConfig.ratios",),
-       old=(("--burst-ratios", ("dem crosscheck",)),)),
+       old=(("--burst-ratios", ("crosscheck",)),)),
     _T("--start-fractions", "comma-separated start states, fractions f of the drained peak eta",
        "-", "reals", 0, 1, hi_open=False, fields=("BurstConfig.start_fractions",),
-       old=(("--burst-fractions", ("dem crosscheck",)),)),
+       old=(("--burst-fractions", ("crosscheck",)),)),
     _T("--dc", "step of c = s1 + R s2 held after the switch (dG = B dc per unit thickness)",
        "Pa", "real", 0, None, False, fields=("BurstConfig.dc", "BurstOptions.dc")),
     _T("--path-strain", "largest axial strain of a proportional path from its start", "-",
@@ -443,7 +443,7 @@ VOCABULARY = {t.name: t for t in (
     _T("--no-fields", "no fields.xdmf / fields.h5", None, "flag"),
     _T("--n-sphere", "strain directions sampled for the local minimum of W2", "-", "int",
        fields=("BiaxialConfig.n_sphere",)),
-    # -- dem bench, calibrate, crosscheck ------------------------------------------------------
+    # -- dem bench, calibrate; crosscheck ------------------------------------------------------
     _T("--steps", "time steps measured", "steps", "int", 1, None, False),
     _T("--rounds", "interleaved rounds of the measurement", "-", "int", 1, 100, False, False),
     _T("--busy-core", "measure beside a busy-loop process (a shared machine)", None, "flag"),
@@ -755,6 +755,8 @@ def _grouped(paths) -> list:
 # -- whose folder: every command that writes a folder records itself there -------------------
 OWNER_FILE = "command.json"
 _SNAPSHOT_MAX = 20_000      # files listed at most (a DEM folder holds a few thousand)
+# commands that moved (issue 33): a folder the former one wrote is the new one's (its --resume)
+RENAMED_COMMANDS = {"python -m dem crosscheck": "python -m crosscheck"}
 
 
 def snapshot(path) -> dict:
@@ -778,13 +780,14 @@ def snapshot(path) -> dict:
 def folder_owner(path):
     """The command that wrote the folder ``path`` ("python -m dem biaxial"): its command.json,
     else the note of its params.json (every command's starts with the command: folders written
-    before command.json), else None (no record: a folder of no command, or empty)."""
+    before command.json), else None (no record: a folder of no command, or empty). A command
+    that moved is named as it is now (``RENAMED_COMMANDS``)."""
     import json
     try:
         with open(os.path.join(path, OWNER_FILE)) as f:
             c = json.load(f).get("command")
         if isinstance(c, str) and c:
-            return c
+            return RENAMED_COMMANDS.get(c, c)
     except (OSError, ValueError, AttributeError):
         pass
     try:

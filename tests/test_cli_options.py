@@ -1,6 +1,6 @@
 """Every subcommand's parser, walked: exact options, the same run options everywhere.
 
-The three CLIs build their parsers with ``hmodel.options.Parser``: no prefix matching (argparse
+The CLIs (hmodel, fem, dem and the cross-check above them) build their parsers with ``hmodel.options.Parser``: no prefix matching (argparse
 would take ``--sigma`` for ``--sigma2`` and run), an unknown option refused by the subcommand
 that got it, naming the options it resembles and that subcommand's own ``--help``. Commands that
 show progress take ``--quiet``; the long DEM commands take ``--workers``, ``--resume`` and
@@ -14,13 +14,15 @@ import pytest
 
 from hmodel.options import OptionError
 
-CLIS = ("hmodel", "fem", "dem")
+CLIS = ("hmodel", "fem", "dem", "crosscheck")
 
 # commands that print no progress (a file is written at once, or only figures are printed)
 NO_PROGRESS = {("hmodel", "params"), ("dem", "params"), ("dem", "bench")}
 
 # the DEM commands that spread runs over processes or a cluster, and resume an interrupted run
-LONG_DEM = ("probes", "domain", "burst", "calibrate", "crosscheck")
+# (the cross-check's DEM part among them: python -m crosscheck, one command)
+LONG_DEM = [("dem", "probes"), ("dem", "domain"), ("dem", "burst"), ("dem", "calibrate"),
+            ("crosscheck", None)]
 RUN_OPTIONS = ("--workers", "--resume", "--scheduler")
 # PENDING: options a command is to get on another branch; remove an entry once it is there (the
 # test below fails as a reminder when it appears). None pending now.
@@ -32,14 +34,35 @@ def build(module):
         from hmodel.cli import build_parser
     elif module == "fem":
         from fem.__main__ import build_parser
+    elif module == "crosscheck":
+        from crosscheck.__main__ import build_parser
     else:
         from dem.__main__ import build_parser
     return build_parser()
 
 
 def subcommands(parser):
-    (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    """name -> parser of every subcommand; {None: parser} for a command without subcommands
+    (python -m crosscheck)."""
+    actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not actions:
+        return {None: parser}
+    (action,) = actions
     return action.choices
+
+
+def _words(name):
+    """The subcommand's word of an argv: none for a command without subcommands."""
+    return [] if name is None else [name]
+
+
+def _command(module, name):
+    """"dem biaxial", "crosscheck": the command as the vocabulary's former names list it."""
+    return " ".join([module, *_words(name)])
+
+
+def _prog(module, name):
+    return f"python -m {_command(module, name)}"
 
 
 ALL = [(m, name) for m in CLIS for name in subcommands(build(m))]
@@ -59,7 +82,7 @@ def test_every_parser_is_exact(module):
     parser = build(module)
     assert parser.allow_abbrev is False
     for name, sub in subcommands(parser).items():
-        assert sub.allow_abbrev is False, f"python -m {module} {name} takes abbreviations"
+        assert sub.allow_abbrev is False, f"{_prog(module, name)} takes abbreviations"
 
 
 @pytest.mark.parametrize("module,name", ALL)
@@ -76,10 +99,10 @@ def test_abbreviations_are_refused_naming_the_option(module, name):
             if prefix in options:
                 continue
             with pytest.raises(OptionError) as e:
-                parser.parse_args([name, *_required(sub), prefix, "1"])
+                parser.parse_args([*_words(name), *_required(sub), prefix, "1"])
             msg = str(e.value)
             assert f"no option {prefix} " in msg and "did you mean" in msg and option in msg, msg
-            assert msg.endswith(f"(see python -m {module} {name} --help)"), msg
+            assert msg.endswith(f"(see {_prog(module, name)} --help)"), msg
             checked += 1
     assert checked > 0
 
@@ -89,24 +112,24 @@ def test_quiet_on_every_command_with_progress(module, name):
     sub = subcommands(build(module))[name]
     has = "--quiet" in sub._option_string_actions
     if (module, name) in NO_PROGRESS:
-        assert not has, f"python -m {module} {name} shows no progress: a --quiet means nothing"
+        assert not has, f"{_prog(module, name)} shows no progress: a --quiet means nothing"
         return
-    assert has, f"python -m {module} {name} shows progress and has no --quiet"
+    assert has, f"{_prog(module, name)} shows progress and has no --quiet"
     q = sub._option_string_actions["--quiet"]
     assert isinstance(q, argparse._StoreTrueAction) and q.default is False
     assert q.help.startswith("no progress lines on stderr")     # the one helper, add_quiet
 
 
-@pytest.mark.parametrize("name", LONG_DEM)
-def test_run_options_on_every_long_dem_command(name):
-    sub = subcommands(build("dem"))[name]
+@pytest.mark.parametrize("module,name", LONG_DEM)
+def test_run_options_on_every_long_dem_command(module, name):
+    sub = subcommands(build(module))[name]
     acts = sub._option_string_actions
     for option in RUN_OPTIONS:
         if (name, option) in PENDING:
-            assert option not in acts, (f"dem {name} has {option} now: remove it from PENDING "
-                                        "in this test")
+            assert option not in acts, (f"{_command(module, name)} has {option} now: remove it "
+                                        "from PENDING in this test")
             continue
-        assert option in acts, f"python -m dem {name} has no {option}"
+        assert option in acts, f"{_prog(module, name)} has no {option}"
     if "--workers" in acts:
         w = acts["--workers"]
         assert w.default is None
@@ -124,8 +147,9 @@ def test_run_options_on_every_long_dem_command(name):
 
 
 def test_fit_dem_parser_is_exact_with_quiet(monkeypatch):
-    """`python -m dem.crosscheck_fit` (one command, no subcommands) follows the same rules."""
-    import dem.crosscheck_fit as fd
+    """`python -m crosscheck.fit` (formerly `python -m dem.crosscheck_fit`; one command, no
+    subcommands) follows the same rules."""
+    import crosscheck.fit.__main__ as fd
     import hmodel.options as opt
     seen = {}
     monkeypatch.setattr(opt, "run_cli", lambda parser, *a, **k: seen.setdefault("parser", parser) and 0)
@@ -164,12 +188,14 @@ MISTAKES = [
      "python -m hmodel probes --help"),
     (["dem", "probes", "--norm", "2e3", "--state", "S", "--out", "OUT"],
      "did you mean --stress-norm?", "python -m dem probes --help"),
-    (["dem", "crosscheck", "--skip-dem", "--out", "OUT"], "did you mean --no-dem?",
-     "python -m dem crosscheck --help"),
-    (["dem", "crosscheck", "--burst-fractions", "0.9", "--out", "OUT"],
-     "did you mean --start-fractions?", "python -m dem crosscheck --help"),
-    (["dem", "crosscheck", "--burst-ratios", "-2", "--out", "OUT"], "did you mean --ratios?",
-     "python -m dem crosscheck --help"),
+    (["crosscheck", "--skip-dem", "--out", "OUT"], "did you mean --no-dem?",
+     "python -m crosscheck --help"),
+    (["crosscheck", "--burst-fractions", "0.9", "--out", "OUT"],
+     "did you mean --start-fractions?", "python -m crosscheck --help"),
+    (["crosscheck", "--burst-ratios", "-2", "--out", "OUT"], "did you mean --ratios?",
+     "python -m crosscheck --help"),
+    (["dem", "crosscheck", "--out", "OUT"], "moved to python -m crosscheck",
+     "python -m crosscheck --help"),
     (["dem", "brust", "--out", "OUT"], "no command 'brust': did you mean burst?",
      "python -m dem --help"),
     (["hmodel", "biaxal", "--out", "OUT"], "no command 'biaxal': did you mean biaxial?",
@@ -195,6 +221,8 @@ def _main(module):
         from hmodel.cli import main
     elif module == "fem":
         from fem.__main__ import main
+    elif module == "crosscheck":
+        from crosscheck.__main__ import main
     else:
         from dem.__main__ import main
     return main
@@ -244,7 +272,7 @@ def test_every_option_is_in_the_vocabulary_with_help_unit_and_default(module, na
             bad.append(f"{option}: the help does not say the default (or required): {h!r}")
         if a.default is None and not a.required and "; default None" in h:
             bad.append(f"{option}: 'default None' says nothing: {h!r}")
-    assert not bad, f"python -m {module} {name}:\n" + "\n".join(bad)
+    assert not bad, f"{_prog(module, name)}:\n" + "\n".join(bad)
 
 
 def test_every_quantity_has_a_unit_and_every_switch_is_positive_or_no():
@@ -267,7 +295,7 @@ RETIRED = ("--confining", "--eps-max", "--norm", "--sigma-norm", "--friction", "
 def test_retired_names_are_gone(module, name):
     sub = subcommands(build(module))[name]
     opts = set(sub._option_string_actions)
-    assert not opts & set(RETIRED), f"python -m {module} {name}: {sorted(opts & set(RETIRED))}"
+    assert not opts & set(RETIRED), f"{_prog(module, name)}: {sorted(opts & set(RETIRED))}"
     assert not [o for o in opts if o.startswith("--skip")]
     if (module, name) == ("hmodel", "probes"):
         assert "--eta" not in opts and "--eta-a" in opts
@@ -288,11 +316,11 @@ def test_the_issues_options_where_the_issue_says():
             ("dem", "probes"): ("--stress-norm",),
             ("hmodel", "burst"): ("--d-eps1", "--path-d-eps1"),
             ("fem", "burst"): ("--d-eps1", "--path-d-eps1"),
-            ("dem", "crosscheck"): ("--no-dem", "--start-fractions", "--ratios")}
+            ("crosscheck", None): ("--no-dem", "--start-fractions", "--ratios")}
     for (module, name), options in want.items():
         acts = subcommands(build(module))[name]._option_string_actions
         for o in options:
-            assert o in acts, f"python -m {module} {name} has no {o}"
+            assert o in acts, f"{_prog(module, name)} has no {o}"
     for module, name in ALL:
         acts = subcommands(build(module))[name]._option_string_actions
         if "--d-eps1" in acts:
@@ -319,13 +347,13 @@ def test_every_former_name_says_its_new_one():
     for t in VOCABULARY.values():
         for old, commands in t.old:
             for module, name in ALL:
-                if commands and f"{module} {name}" not in commands:
+                if commands and _command(module, name) not in commands:
                     continue
                 parser = build(module)
                 sub = subcommands(parser)[name]
                 if t.name not in sub._option_string_actions:
                     continue
-                argv = [name, *_required(sub), old] + (["1"] if t.kind != "flag" else [])
+                argv = [*_words(name), *_required(sub), old] + (["1"] if t.kind != "flag" else [])
                 with pytest.raises(OptionError) as e:
                     parser.parse_args(argv)
                 msg = str(e.value)

@@ -2,7 +2,8 @@
 
 Every command of the README (its code blocks and the first column of its table of commands) is
 checked against the parser its CLI builds (`hmodel.cli.build_parser`, `fem.__main__.build_parser`,
-`dem.__main__.build_parser`): the subcommand exists, every option is one of the subcommand's own
+`dem.__main__.build_parser`, `crosscheck.__main__.build_parser`): the subcommand exists (the
+cross-check is one command, without subcommands), every option is one of the (sub)command's own
 option strings as written (no abbreviation), and the whole line parses. Parsing computes and
 writes nothing; it runs in a temporary folder all the same.
 
@@ -33,6 +34,7 @@ MAX_LINES = 150           # the issue's "under ~150 lines"
 CHEAP_S = 15.0            # README wall time, idle machine, warm cache [s]
 
 SET_UP = ("python3 -m venv ", ". .venv/bin/activate", "pip install ", "python -m pytest")
+CLIS = ("hmodel", "fem", "dem", "crosscheck")
 
 
 def _text():
@@ -80,9 +82,9 @@ def _segments(command):
 
 
 def _cli(segment):
-    """(module, argv) of a `python -m hmodel|fem|dem ...` command, else None."""
+    """(module, argv) of a `python -m hmodel|fem|dem|crosscheck ...` command, else None."""
     words = shlex.split(segment)
-    if words[:2] == ["python", "-m"] and len(words) > 2 and words[2] in ("hmodel", "fem", "dem"):
+    if words[:2] == ["python", "-m"] and len(words) > 2 and words[2] in CLIS:
         return words[2], words[3:]
     return None
 
@@ -94,7 +96,7 @@ def _all_cli_commands():
         for seg in _segments(command):
             if _cli(seg) is None:
                 assert seg.startswith(SET_UP), (
-                    f"README command {seg!r}: neither a `python -m hmodel|fem|dem` command nor a "
+                    f"README command {seg!r}: neither a `python -m hmodel|fem|dem|crosscheck` command nor a "
                     "set-up step; teach tests/test_readme.py to check it")
             elif seg not in seen:
                 seen.append(seg)
@@ -106,30 +108,35 @@ def _parser(module):
         from hmodel.cli import build_parser
     elif module == "fem":
         from fem.__main__ import build_parser
+    elif module == "crosscheck":
+        from crosscheck.__main__ import build_parser
     else:
         from dem.__main__ import build_parser
     return build_parser()
 
 
 def _subparser(parser, name):
+    """The subcommand ``name`` of ``parser`` (None if it has no such one), or ``parser`` itself
+    if it has no subcommands (``python -m crosscheck``)."""
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             return action.choices.get(name)
-    raise AssertionError(f"{parser.prog} has no subcommands")
+    return parser
 
 
 def _check_available(module, argv):
     """Skip (naming it) a command or option being added on another branch and absent here;
     fail on any other unknown subcommand or option. Returns the subparser."""
     parser = _parser(module)
-    sub = _subparser(parser, argv[0])
+    sub = _subparser(parser, argv[0] if argv else None)
     if sub is None:
         raise AssertionError(f"`python -m {module}` has no subcommand {argv[0]!r}")
-    for word in argv[1:]:
+    options = argv if sub is parser else argv[1:]
+    for word in options:
         if word.startswith("--"):
             option = word.split("=", 1)[0]
             if option not in sub._option_string_actions:
-                raise AssertionError(f"`python -m {module} {argv[0]}` has no option {option} "
+                raise AssertionError(f"`{sub.prog}` has no option {option} "
                                      "(written in full, as the README must)")
     return parser
 

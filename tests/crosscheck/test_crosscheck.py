@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from dem.crosscheck import run_crosscheck
+from crosscheck import run_crosscheck
 
 ALPHAS = [0.0, 60.0, 70.0, 80.0, 90.0, 150.0, 200.0, 225.0, 235.0, 240.0, 245.0, 250.0, 260.0, 300.0]
 
@@ -83,7 +83,7 @@ def test_dem_runs_on_a_dask_cluster_give_the_same_probes(xc, tmp_path):
     # cluster (here a local one of two workers) and come back the same, to the byte
     import shutil
     distributed = pytest.importorskip("distributed")
-    from dem.crosscheck import DEFAULT_SMALL, dem_part
+    from crosscheck import DEFAULT_SMALL, dem_part
     out, c = xc
     shutil.copytree(out / "dem" / "biaxial", tmp_path / "dem" / "biaxial")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,

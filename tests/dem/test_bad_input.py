@@ -1,18 +1,12 @@
-"""Bad input to `python -m dem`: one line naming the option and its allowed range, exit code 2,
-no traceback, nothing written; Ctrl-C / SIGTERM: one line, exit 130 / 143."""
+"""Bad input to `python -m dem` (and to `python -m crosscheck`, its `crosscheck` command until
+issue 33): one line naming the option and its allowed range, exit code 2, no traceback, nothing
+written; Ctrl-C / SIGTERM: one line, exit 130 / 143."""
 import signal
 
 import pytest
 
+from tests._cli import run_dem as _run
 from tests._interrupt import interrupt_after
-
-
-def _run(argv, capsys):
-    from dem.__main__ import main
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    err = capsys.readouterr().err.strip().splitlines()
-    return e.value.code, err
 
 
 CASES = [
@@ -38,6 +32,9 @@ CASES = [
     (["crosscheck", "--scheduler", "nonsense"], "--scheduler"),
     (["crosscheck", "--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),
     (["crosscheck", "--scheduler", "tcp://127.0.0.1:1", "--workers", "2"], "--scheduler"),
+    (["crosscheck", "--threads", "0"], "--threads"),
+    (["crosscheck", "--start-fractions", "0.91"], "--start-fractions"),
+    (["crosscheck", "--ratios", "1"], "--ratios"),
     (["domain", "--biaxial", "B", "--scheduler", "127.0.0.1:1"], "--scheduler"),
     (["probes", "--state", "S", "--scheduler", "tcp://127.0.0.1:x"], "--scheduler"),
 ]

@@ -90,7 +90,7 @@ def test_the_ledger_of_the_probes_quotes_a_normalized_w2(caught, tmp_path):
 
 def test_the_cross_checks_eq1_figure(caught, tmp_path):
     """fig_burst_eq1.png of ``dem crosscheck``: the FE's terms beside the DEM's, symlog axes."""
-    from dem.crosscheck_burst import burst_eq1_figure
+    from crosscheck.burst.figures import burst_eq1_figure
     fe, dm = _ledger_history("settled"), _ledger_history("runaway")
     fe_cols = {"t": fe["t_ledger"], "ke": np.abs(fe["dke"]), "w2_ext": fe["w2_ext"],
                "w2_int": fe["w2_int"], "damping": -fe["w_damp"]}

@@ -8,13 +8,7 @@ from pathlib import Path
 import pytest
 
 from dem.params import UNITS, DemParams, load_params
-
-
-def _run(argv, capsys):
-    from dem.__main__ import main
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    return e.value.code, capsys.readouterr().err.strip().splitlines()
+from tests._cli import run_dem as _run
 
 
 def test_params_file_round_trip_and_options_on_top(tmp_path, capsys):
@@ -146,7 +140,7 @@ def test_a_state_refuses_parameters_that_are_not_its_own(small_sample, tmp_path,
 def test_crosscheck_takes_an_hmodel_file(tmp_path, capsys):
     """`crosscheck --hmodel-params FILE`: the H-model part runs the file's material at the
     cross-check's 200 kPa; a file of the other model is refused before anything runs."""
-    from dem.crosscheck import hmodel_part
+    from crosscheck import hmodel_part
     from dem.params import save_params
     from hmodel import HParams
     h = hmodel_part(domain_sigma2=(), params=HParams(n_dir=36, phi_g=25.0, p0=1e5))

@@ -44,7 +44,7 @@ def test_fig15_marks_the_failed_direction(gallery_rows, figures, tmp_path):
 
 
 def test_crosscheck_polar_figure(gallery_rows, figures, tmp_path):
-    from dem.crosscheck import polar_figure
+    from crosscheck.figures import polar_figure
     from hmodel import HParams
     from hmodel.experiment import state_at_eta
     from hmodel.probes import arcs, directional_sweep

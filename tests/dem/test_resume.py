@@ -52,7 +52,7 @@ def test_crosscheck_dem_part_resumes_what_an_interrupted_run_finished(tmp_path, 
     # finished biaxial test, the relaxed reference and the probe runs from disk, runs only
     # the missing probe run, and returns the same rows as the uninterrupted run.
     import dem.probes as probes
-    from dem import crosscheck
+    import crosscheck
     kw = dict(n=150, seed=2, rate=0.2, alphas=[45.0, 225.0], max_steps=20_000, workers=1,
               eta_a=0.3, threads=1, domain=False)
     ref = crosscheck.dem_part(str(tmp_path), **kw)

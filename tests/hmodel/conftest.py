@@ -42,5 +42,5 @@ def no_computation(monkeypatch):
 
     def boom(*a, **k):
         raise AssertionError("computation started before the options were validated")
-    for name in ("biaxial_test", "state_at_eta", "bifurcation_domain", "compile_kernels"):
+    for name in ("biaxial_test", "directional_analysis", "bifurcation_domain", "compile_kernels"):
         monkeypatch.setattr(cli, name, boom)

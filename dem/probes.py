@@ -27,6 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.io import atomic_open
 from common.threads import ThreadChooser
 
 from .ledger import Ledger, max_eq1_bookkeeping
@@ -641,7 +642,6 @@ def plot_probes(rows, out_dir, note=""):
         fig.legend(*ax.get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7,
                    frameon=False)
         fig.tight_layout(rect=(0, 0.1, 1, 0.97))
-        tmp = os.path.join(out_dir, ".tmp-" + name)
-        fig.savefig(tmp, dpi=120, format="png")
+        with atomic_open(os.path.join(out_dir, name), "wb") as f:
+            fig.savefig(f, dpi=120, format="png")
         plt.close(fig)
-        os.replace(tmp, os.path.join(out_dir, name))

@@ -21,7 +21,7 @@ import numpy as np
 from dem.anatomy import anatomy, contact_state, plot_anatomy, write_anatomy_vtk
 from dem.bench import confined_sample
 from dem.simulation import Simulation
-from dem.threads import ThreadChooser
+from common.threads import ThreadChooser
 from dem.walls import strain_rate
 
 

@@ -38,7 +38,7 @@ def _task(args):
 
 
 def main(argv=None):
-    from hmodel import options as opt
+    from common import options as opt
     ap = opt.Parser(prog="python bench/burst_holds.py", description=__doc__.split("\n\n")[0])
     ap.add_argument("dir", help="a dem burst output folder")
     ap.add_argument("--factors", type=opt.reals(0), default=[0.25, 1.0, 4.0],

@@ -32,7 +32,7 @@ def main(argv=None):
     ap.add_argument("--fraction", type=float, default=0.9)
     ap.add_argument("--rates", default="0.01,0.003,0.001,0.0003")
     ap.add_argument("--d-eps1", default="3e-6,1e-5,3e-5")
-    ap.add_argument("--threads", type=int, default=None, help="default: dem.threads chooses")
+    ap.add_argument("--threads", type=int, default=None, help="default: common.threads chooses")
     ap.add_argument("--switches", default="below,past", help="the states probed")
     a = ap.parse_args(argv)
     rates = [float(x) for x in a.rates.split(",")]

@@ -1,6 +1,6 @@
 """Command line: ``python -m crosscheck --out DIR [--full] ...``, the cross-check of the three
 parts (``crosscheck.run.run_crosscheck``), with the options ``python -m dem crosscheck`` had, from
-the vocabulary of ``hmodel.options`` and checked by the same rules (one line, exit 2, before
+the vocabulary of ``common.options`` and checked by the same rules (one line, exit 2, before
 anything runs). One command, no subcommands: the H-model fit to a DEM run is its own command,
 ``python -m crosscheck.fit``."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import os
 import sys
 import time
 
-from hmodel import options as opt
+from common import options as opt
 
 DESCRIPTION = """The cross-check of the three parts: the H-model material point, the FE biaxial
 specimen and the DEM sample side by side, each conclusion of the paper's section 5 stated with
@@ -39,7 +39,7 @@ def build_parser() -> opt.Parser:
         note="for the DEM's relaxations and probes (one task a run)")
     add(x, "--no-dem")
     add(x, "--no-domain")
-    add(x, "--threads", default_text="auto (dem.threads)",
+    add(x, "--threads", default_text="auto (common.threads)",
         note="of the DEM compaction, biaxial test and relaxations")
     add(x, "--resume", note="the DEM work an interrupted run left in --out/dem")
     add(x, "--dem-domain", default_text="on, off with --full (use dem domain there)")

@@ -37,8 +37,8 @@ def polar_figure(path, h, rows, dem_title="DEM (Fig. 15)"):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.io import save_figure
-    from hmodel.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes, polar_series
+    from common.io import save_figure
+    from common.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes, polar_series
     from hmodel.probes import arcs
     rmax = 1.6
     sw = h["sweep"]
@@ -100,7 +100,7 @@ def figures(out, h, dem, fem) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.io import save_figure
+    from common.io import save_figure
 
     figs = {}
     sw = h["sweep"]

@@ -122,7 +122,7 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     from dem.experiment import COLUMNS, SAVE_FRACTIONS, BiaxialResult, run_biaxial
     from dem.params import DemParams
     from dem.probes import ProbeOptions, directions
-    from dem.threads import set_default_threads
+    from common.threads import set_default_threads
 
     set_default_threads(threads)
     log = say if verbose else quiet

@@ -46,7 +46,7 @@ def run_crosscheck(out_dir, full=False, n=None, seed=1, rate=None, workers=None,
     peak, c held below and past its peak, in the H-model, the FE specimen and the DEM sample.
     ``verbose``: progress lines on stderr.
     """
-    from hmodel.io import atomic_open
+    from common.io import atomic_open
 
     from dem.params import DemParams, load_params
     from dem.probes import directions

@@ -4,6 +4,6 @@ walls (boundary control), simulation (State, Simulation), sample (generator, com
 experiment (biaxial test), probes (directional analysis, W2), io (files), bench.
 CLI: python -m dem {biaxial, probes, bench}; see docs/dem.md."""
 
-from hmodel.options import listen_for_compilation
+from common.options import listen_for_compilation
 
 listen_for_compilation()     # a script's first compilation is announced, as the CLI's

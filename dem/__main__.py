@@ -1,5 +1,5 @@
 """Command line: python -m dem {biaxial, probes, domain, burst, params, bench, calibrate} (over
-the library), its options from the vocabulary of ``hmodel.options``. The cross-check of the
+the library), its options from the vocabulary of ``common.options``. The cross-check of the
 three parts moved above them (``python -m crosscheck``, issue 33): ``python -m dem crosscheck``
 answers in one line where it went (``MOVED``)."""
 from __future__ import annotations
@@ -11,9 +11,9 @@ import os
 import sys
 import time
 
-from hmodel import options as opt     # the command-line rules shared by every CLI
+from common import options as opt     # the command-line rules shared by every CLI
+from common.io import atomic_write_bytes, fmt
 from hmodel.burst_rule import RELEASE
-from hmodel.io import fmt
 
 from .params import OPTIONS
 
@@ -75,7 +75,7 @@ def _directions(a):
 
 
 def _threads(a):
-    from .threads import set_default_threads
+    from common.threads import set_default_threads
     set_default_threads(getattr(a, "threads", None))
 
 
@@ -144,7 +144,7 @@ def cmd_probes(a):
                "n_disks": state.params.n,
                "sigma2": s2, "directions": len(rows), "outcomes": dict(cnt),
                "options": opts._asdict(), "wall_time": time.time() - t0}
-    io.atomic_write_bytes(os.path.join(a.out, "summary.json"),
+    atomic_write_bytes(os.path.join(a.out, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     print(note)
     print(f"probes: {len(rows)} directions -> {os.path.join(a.out, 'probes.csv')}; "
@@ -315,7 +315,7 @@ def _probe_parser_options(p):
     add(g, "--fail-ratio", 1000.0, record=PO)
     add(g, "--plastic-tol", 0.05, record=PO)
     add(g, "--relax-max-steps", 2_000_000, record=PO, note="of the state into the reference")
-    add(g, "--threads", default_text="auto (dem.threads)", note="of the relaxation; each probe "
+    add(g, "--threads", default_text="auto (common.threads)", note="of the relaxation; each probe "
         "runs on one")
     add(g, "--workers", default_text="the cores")
     add(g, "--scheduler", default_text="none (local processes)")
@@ -323,7 +323,7 @@ def _probe_parser_options(p):
 
 def build_parser() -> opt.Parser:
     """The parser of ``python -m dem`` (every subcommand and option, from the vocabulary of
-    ``hmodel.options``), built without running anything: ``main`` parses with it, the tests
+    ``common.options``), built without running anything: ``main`` parses with it, the tests
     check commands against it."""
     add = opt.add
     ap = opt.Parser(prog="python -m dem", description=DESCRIPTION)
@@ -343,7 +343,7 @@ def build_parser() -> opt.Parser:
     add(g, "--save-etas", [], default_text="none")
     add(g, "--resume", note="from --out/checkpoint.npz")
     add(g, "--no-vtk")
-    add(g, "--threads", default_text="auto (dem.threads)")
+    add(g, "--threads", default_text="auto (common.threads)")
     opt.add_quiet(g)
     b.set_defaults(func=cmd_biaxial)
 
@@ -411,7 +411,7 @@ def build_parser() -> opt.Parser:
     add(g, "--scheduler", default_text="none (local processes)")
     add(g, "--workers", default_text="the cores", note="the paths, then each path's rest search "
         "and its runs; one thread each")
-    add(g, "--threads", default_text="auto (dem.threads)", note="of a run alone in the process")
+    add(g, "--threads", default_text="auto (common.threads)", note="of a run alone in the process")
     add(g, "--params", metavar="FILE", note="refused unless it is the states' own",
         default_text="the states'")
     opt.add_quiet(g)
@@ -499,7 +499,7 @@ def check_run_options(a):
         from .probes import check_scheduler
         check_scheduler(a.scheduler)
     if getattr(a, "threads", None) is not None:
-        from .threads import check_threads
+        from common.threads import check_threads
         check_threads(a.threads)
 
 

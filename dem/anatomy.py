@@ -509,7 +509,7 @@ def plot_anatomy(path, panels, dpi=150):
     import matplotlib.pyplot as plt
     from matplotlib.collections import EllipseCollection, LineCollection
 
-    from hmodel.io import save_figure
+    from common.io import save_figure
     if not panels:
         raise ValueError("panels: allowed: one (title, sim, s0) or more")
     w, h = panels[0][1].size

@@ -1,7 +1,7 @@
 """Throughput benchmark: particle-steps/s on a dense sample confined at 200 kPa.
 
 ``bench`` measures, in one process and one sitting, the same sample stepped on one thread,
-on the default choice (``auto``, see ``dem.threads``) and on every thread, optionally while a
+on the default choice (``auto``, see ``common.threads``) and on every thread, optionally while a
 busy-loop process keeps a core occupied (what a shared 2-core machine looks like).  The rounds
 are interleaved so that a change of the machine's load hits every variant alike.  Then the
 energy ledger's cost, ``ledger_cost``: a step's time with it over without it.
@@ -17,10 +17,11 @@ import time
 
 import numpy as np
 
+from common.threads import ThreadChooser, available_threads
+
 from . import io
 from .params import DemParams
 from .sample import compact
-from .threads import ThreadChooser, available_threads
 
 
 def confined_sample(n=12000, seed=1, cache_dir=None, params=None):

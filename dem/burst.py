@@ -61,6 +61,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.io import atomic_write_bytes
+from common.threads import ThreadChooser
 from hmodel.burst import check_ratio
 from hmodel.burst_rule import RELEASE
 
@@ -69,7 +71,6 @@ from .anatomy import ANATOMY_COLUMNS, UNSTABLE_WINDOW, contact_state
 from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS, Ledger
 from .settle import HISTORY_COLUMNS as SETTLE_COLUMNS, RULE_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
-from .threads import ThreadChooser
 from .walls import strain_rate, tied
 
 SWITCHES = ("below", "past")
@@ -687,7 +688,7 @@ class _Journal:
                     except ValueError:
                         continue
         if base:
-            from .io import atomic_write_bytes
+            from common.io import atomic_write_bytes
             atomic_write_bytes(base + ".jsonl", "".join(json.dumps(r) + "\n"
                                                          for r in self.records).encode())
 
@@ -1010,7 +1011,7 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     params.json, the states the switches started from (rest/) and the figures. Returns (burst
     rows as dicts, summary dict)."""
     from . import io
-    from .io import atomic_write_bytes
+    from common.io import atomic_write_bytes
     from .probes import _map
     ratios = [check_ratio(float(r)) for r in ratios]
     starts, eta_peak, params = load_starts(biaxial_dir, fractions, params_file)
@@ -1029,7 +1030,7 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     atomic_write_bytes(ck, "".join(json.dumps(r) + "\n" for r in [header] + done).encode())
     combos = [(r, f, st) for r in ratios for f, st, _ in starts]
     # a run in a pool of processes runs on one thread; alone in this process, on ``threads``
-    # (None: dem.threads chooses)
+    # (None: common.threads chooses)
     per_run = lambda tasks: (threads if threads is not None or (workers == 1 and not scheduler)
                              or len(tasks) == 1 else 1)
     log = _log if verbose else (lambda m: None)
@@ -1290,7 +1291,7 @@ def write_burst_files(out_dir, combos, paths, stairs, rows, summary):
     io.write_csv(os.path.join(out_dir, "probes.csv"), PROBE_COLUMNS,
                  [[r, f] + [getattr(p, c) for c in PROBE_COLUMNS[2:]]
                   for (r, f), res in stairs.items() for p in res.probes.values()])
-    io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
+    atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     plot_burst(out_dir, combos, paths, stairs, runs, summary)
     from .ledger import plot_ledger
@@ -1317,7 +1318,7 @@ def plot_burst(out_dir, combos, paths, stairs, runs, summary):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.io import save_figure
+    from common.io import save_figure
     n = summary["n_disks"]
     fig, ax = plt.subplots(figsize=(8, 5), constrained_layout=True)
     for j, (r, f, _) in enumerate(combos):
@@ -1438,7 +1439,7 @@ def plot_k_path(path, combos, stairs, n):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.io import save_figure
+    from common.io import save_figure
     fig, ax = plt.subplots(figsize=(8, 5), constrained_layout=True)
     drawn = False
     for j, (r, f, _) in enumerate(combos):

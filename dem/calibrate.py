@@ -60,6 +60,8 @@ import time
 
 import numpy as np
 
+from common.io import atomic_write_bytes
+
 from .params import OPTIONS, RENAMED, DemParams, migrate, record_params, save_params
 
 TOLERANCES = {"peak_q": 0.05, "eps1_95": 0.25, "secant": 0.20}
@@ -651,7 +653,7 @@ def _evaluate_task(a):
     """One DEM evaluation: compaction + drained biaxial test of a["params"] on one thread.
     In a["work_dir"] (local runs: resumable, result.json written there when done) or in a
     temporary folder (dask workers); returns the curve and the run's figures."""
-    from . import threads
+    from common import threads
     from .experiment import run_biaxial
     old = threads._default
     threads.set_default_threads(1)
@@ -674,7 +676,7 @@ def _evaluate_task(a):
                "porosity": comp.get("porosity"), "compaction_converged": comp.get("converged"),
                "steps": int(rows[-1, 0]), "wall_time": float(res.wall_time)}
         if tmp is None:
-            from .io import atomic_write_bytes
+            from common.io import atomic_write_bytes
             atomic_write_bytes(os.path.join(wd, "result.json"), json.dumps(out).encode())
             for name in os.listdir(wd):          # the run's files are not needed any more
                 p = os.path.join(wd, name)
@@ -765,7 +767,7 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
     first seed), curves.csv, calibration.png, calibration_search.png, calibration_score.png,
     report.md and summary.json; returns the summary.  ``max_evals`` counts parameter sets (each
     is len(seeds) runs).  ``task``: the run function (default: the DEM run
-    ``_evaluate_task``; tests pass a cheap one).  ``stage``: an ``hmodel.options.Stage`` told
+    ``_evaluate_task``; tests pass a cheap one).  ``stage``: a ``common.options.Stage`` told
     where the run is and what it has written (for the line of an interrupted command)."""
     t0 = time.time()
     if target not in TARGETS:
@@ -819,7 +821,7 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
         os.replace(ck, os.path.join(out_dir, "evaluations.previous.jsonl"))
         _say(verbose, f"[calibrate] {out_dir} held an earlier calibration: moved to "
                       "evaluations.previous.jsonl (--resume continues one)")
-    io.atomic_write_bytes(ck, ("\n".join([json.dumps({"header": header})]
+    atomic_write_bytes(ck, ("\n".join([json.dumps({"header": header})]
                                          + [json.dumps(r) for r in done.values()]) + "\n").encode())
     if done:
         _say(verbose, f"[calibrate] --resume: {len(done)} finished runs in {ck} (not run again)")
@@ -975,7 +977,7 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                          "calibration_runs.csv", "curves.csv", "calibration.png",
                          "calibration_search.png", "calibration_score.png", "report.md",
                          "evaluations.jsonl", "summary.json"]}
-    io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
+    atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     _report(out_dir, summary, space, records)
     if os.path.isdir(work) and not os.listdir(work):
@@ -1180,7 +1182,7 @@ def _report(out_dir, s, space, records):
                          f"{'fixed by the targets' if share <= 0.25 else 'not fixed' if share >= 0.6 else 'partly fixed'})")
         else:
             L += ["", "The model predicts no region where every target is met."]
-    io.atomic_write_bytes(os.path.join(out_dir, "report.md"), ("\n".join(L) + "\n").encode())
+    atomic_write_bytes(os.path.join(out_dir, "report.md"), ("\n".join(L) + "\n").encode())
 
 
 def current_params(d: dict) -> dict:
@@ -1324,12 +1326,12 @@ def _score_figure(out_dir, space, records, best, model):
     """calibration_score.png: the score of every set against each varied parameter (filled
     green: all targets met, drawn over the best set's open star), and the model's least
     predicted score over the other parameters; log parameters on log axes labelled at 1, 2, 5
-    of each decade (``hmodel.plots.log_axis``)."""
+    of each decade (``common.plots.log_axis``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.plots import log_axis
+    from common.plots import log_axis
     d = len(space.names)
     fig, axes = plt.subplots(1, d, figsize=(4.2 * d, 4.6), squeeze=False, layout="constrained")
     dense = dense_points(d, 1)
@@ -1372,7 +1374,7 @@ def _search_figure(out_dir, space, records, best):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.plots import log_axis
+    from common.plots import log_axis
     fig, ax = plt.subplots(figsize=(5.5, 4.3), layout="constrained")
     sc = np.array([r["score"] for r in records])
     x = np.array([r["values"][0] for r in records])
@@ -1448,5 +1450,5 @@ def redraw_figures(out_dir):
 
 
 def _save(fig, out_dir, name):
-    from hmodel.io import save_figure       # the project's one atomic figure writer
+    from common.io import save_figure       # the project's one atomic figure writer
     save_figure(fig, os.path.join(out_dir, name), dpi=120)

@@ -27,6 +27,8 @@ import time
 
 import numpy as np
 
+from common.io import atomic_write_bytes
+
 from . import io
 from .params import record_params
 from .probes import (COLUMNS as PROBE_COLUMNS, ProbeOptions, _map, csv_rows, directions,
@@ -234,7 +236,7 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
           hmodel_boundary(todo[0][1].control.s_to[0] if todo else 200e3) if hmodel else None)
     if hm:
         b["hmodel"] = hm
-    io.atomic_write_bytes(os.path.join(out_dir, "boundaries.json"),
+    atomic_write_bytes(os.path.join(out_dir, "boundaries.json"),
                           json.dumps(b, indent=1, default=float).encode())
     plot_domain(drows, by, todo, b, out_dir)
     log(f"done in {time.time() - t0:.0f} s: lower boundary {b['lower_state']} "
@@ -296,7 +298,7 @@ def plot_domain(drows, by, todo, b, out_dir):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.io import save_figure
+    from common.io import save_figure
     fig, ax = plt.subplots(figsize=(8, 4.8), constrained_layout=True)
     cmap = plt.get_cmap("viridis")
     for k, (name, st, _) in enumerate(todo):

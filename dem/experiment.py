@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.io import atomic_write_bytes
+
 from . import io
 from .params import DemParams, record_params
 from .sample import compact
@@ -208,7 +210,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     summary = {k: v for k, v in info.items() if k not in ("rows", "candidates")}
     summary.update(n=sim.n, rate=rate, confining=confining, eta_a=eta_a, dt=sim.dt,
                    wall_time=wall, params=params.to_dict(), parameters=params_note)
-    io.atomic_write_bytes(os.path.join(out_dir, "summary.json"),
+    atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     if figures:
         plot_biaxial(rows, info.get("A"), out_dir, n=sim.n, sigma2=confining, rate=rate)
@@ -248,14 +250,14 @@ def _save_path_states(out_dir, cdir, cands, first, eta_max, fractions, etas):
 
 def plot_biaxial(rows, a_row, out_dir, n=None, sigma2=None, rate=None):
     """Figs. 13 (q vs eps1) and 14 (eps_v vs eps1) as PNG, point A marked and labelled off the
-    curve (``hmodel.plots.label_point``); the title names the sample (``n`` disks), the
+    curve (``common.plots.label_point``); the title names the sample (``n`` disks), the
     confining stress ``sigma2`` [Pa] and the axial strain rate ``rate`` [1/s] when given."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.io import save_figure
-    from hmodel.plots import label_point
+    from common.io import save_figure
+    from common.plots import label_point
     arr = np.array([[r[2], r[4], r[8]] for r in rows])
     run = ", ".join(x for x in (f"{n} disks" if n else "",
                                 f"$\\sigma_2$ = {sigma2 / 1e3:g} kPa" if sigma2 else "",

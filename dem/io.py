@@ -1,6 +1,7 @@
-"""Files: state save/load (npz), CSV, VTK snapshots (meshio).  Every write goes to a
-temporary file in the target directory and is moved in place with os.replace, so an
-interrupted run never leaves a half-written file under the final name.
+"""The files of dem: state save/load (npz), its tables (CSV, every float to the bit), VTK
+snapshots (meshio).  Every write goes through the atomic writers of ``common.io`` (a temporary
+file in the target directory, moved in place with os.replace), so an interrupted run never
+leaves a half-written file under the final name.
 
 State file format (npz, FORMAT_VERSION = 5), arrays:
   format ("dem-state"), format_version (int), params (JSON of DemParams),
@@ -30,10 +31,12 @@ import csv
 import io as _io
 import json
 import os
-import tempfile
 import zipfile
 
 import numpy as np
+
+from common.io import REPR, atomic_path, atomic_write_bytes
+from common.io import write_csv as _write_csv
 
 from .params import DemParams
 from .simulation import State, Simulation
@@ -44,30 +47,6 @@ FORMAT_VERSION = 5
 READ_VERSIONS = (1, 2, 3, 4, 5)
 # what a version-1 file's params lacked: the values its runs had
 V1_PARAMS = {"rolling_friction": 0.0, "rolling_stiffness": 1.0}
-
-
-def _umask():
-    m = os.umask(0)
-    os.umask(m)
-    return m
-
-
-def atomic_write_bytes(path, data: bytes):
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=os.path.basename(path))
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())     # mkstemp makes 0600; an output file is 0644
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def save_state(path, state: State, meta: dict | None = None, arrays: dict | None = None):
@@ -171,13 +150,10 @@ def load_state(path) -> tuple[State, dict]:
 
 
 def write_csv(path, header, rows):
-    """Atomic CSV write: header (list of names), rows (iterable of sequences)."""
-    buf = _io.StringIO()
-    wr = csv.writer(buf, lineterminator="\n")
-    wr.writerow(header)
-    for row in rows:
-        wr.writerow([repr(float(v)) if isinstance(v, (float, np.floating)) else v for v in row])
-    atomic_write_bytes(path, buf.getvalue().encode())
+    """A table of dem: header (list of names), rows (iterable of sequences), written by the one
+    CSV writer (``common.io.write_csv``) in dem's number format (``REPR``: every float to the
+    bit, other values as the csv module writes them)."""
+    _write_csv(path, header, rows, fmt=REPR)
 
 
 def read_csv(path):
@@ -198,19 +174,8 @@ def read_csv(path):
 
 def _atomic_meshio(path, mesh):
     import meshio
-    path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=".vtu")
-    os.close(fd)
-    try:
+    with atomic_path(path) as tmp:
         meshio.write(tmp, mesh, file_format="vtu")
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def write_particles_vtk(path, sim: Simulation):

@@ -226,15 +226,15 @@ def plot_ledger(path, panels):
     """One PNG of Eq. 1's terms against the time since the start, one panel per (title, rows,
     columns) in ``panels`` (a run's history: ``rows`` with ``columns`` names, which must hold
     the ledger's ``t_ledger``, ``dke``, ``w2_ext``, ``w2_int``, ``w_damp``, ``u0``). Symmetric
-    log axis (the terms span decades; ``hmodel.plots.symlog_axis``: no tick labels piled at 0).
+    log axis (the terms span decades; ``common.plots.symlog_axis``: no tick labels piled at 0).
     The sum W2_ext - W2_int + W_damp + U0 is drawn dotted on E_c - E_c(0) (Eq. 1: they
     coincide). One legend below the panels (the terms are the same in each), off the curves."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.io import save_figure
-    from hmodel.plots import symlog_axis
+    from common.io import save_figure
+    from common.plots import symlog_axis
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 5.0), squeeze=False,
                              layout="constrained")
     for ax, (title, rows, columns) in zip(axes[0], panels):

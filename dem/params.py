@@ -185,17 +185,17 @@ def hashed_dict(params) -> dict:
 
 
 def _options():
-    from hmodel.options import VOCABULARY
+    from common.options import VOCABULARY
     found = {f.split(".", 1)[1]: t.name for t in VOCABULARY.values() for f in t.fields
              if f.startswith("DemParams.")}
     return {found[f.name]: f.name for f in fields(DemParams) if f.name in found}
 
 
 # The command-line options of the main parameters: option -> field of DemParams (the terms of
-# the vocabulary, hmodel.options.VOCABULARY, checked by DemParams)
+# the vocabulary, common.options.VOCABULARY, checked by DemParams)
 OPTIONS = _options()
 
-# the unit of every field, as a parameter file records it (hmodel.paramfile)
+# the unit of every field, as a parameter file records it (common.paramfile)
 UNITS = {"n": "-", "r_min": "m", "r_max": "m", "density": "kg/m^3", "thickness": "m",
          "kn_over_d": "Pa", "kt_over_kn": "-", "phi_g": "deg", "damping": "-",
          "normal_damping_ratio": "-", "dt_safety": "-", "skin_factor": "-", "servo_gain": "-",
@@ -204,8 +204,8 @@ UNITS = {"n": "-", "r_min": "m", "r_max": "m", "density": "kg/m^3", "thickness":
 
 
 def save_params(path, params: DemParams, note: str | None = None) -> None:
-    """Write ``params`` as a parameter file (the format of hmodel.paramfile, docs/parameters.md)."""
-    from hmodel.paramfile import write_params
+    """Write ``params`` as a parameter file (the format of common.paramfile, docs/parameters.md)."""
+    from common.paramfile import write_params
     write_params(path, params, "dem", UNITS, note)
 
 
@@ -213,7 +213,7 @@ def load_params(path, option: str = "--params") -> DemParams:
     """DemParams from a parameter file (as ``python -m dem params`` writes it, or a file of
     every field and nothing else, the format before units); ValueError of one line naming the
     file and the key. A key renamed since (friction_deg: phi_g) is read under its new name."""
-    from hmodel.paramfile import read_params
+    from common.paramfile import read_params
     return read_params(path, DemParams, "dem", UNITS, option=option, migrate=migrate)
 
 
@@ -231,7 +231,7 @@ def params_from_args(a) -> DemParams:
     ``a.params_note``, the line of the run's summary that says where the values came from
     ("parameters: the file p.json; --phi-g 30 overrides the file's phi_g 35"). An option out of
     range is one line naming it and its range (DemParams checks it)."""
-    from hmodel.paramfile import override
+    from common.paramfile import override
     path = getattr(a, "params", None)
     base = load_params(path) if path else DemParams()
     given = [(o, f, getattr(a, o[2:].replace("-", "_"))) for o, f in OPTIONS.items()
@@ -240,7 +240,7 @@ def params_from_args(a) -> DemParams:
         P, note = override(base, given, f"the file {path}" if path else "the paper's set (defaults)",
                            base.replace)
     except ValueError as e:
-        from hmodel.options import record_error
+        from common.options import record_error
         raise record_error(e, "DemParams") from None
     a.params_note = note
     return P

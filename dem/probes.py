@@ -27,10 +27,12 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.io import atomic_open
+from common.threads import ThreadChooser
+
 from .ledger import Ledger, max_eq1_bookkeeping
 from .settle import HISTORY_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
-from .threads import ThreadChooser
 from .walls import DEAD, TIED, stress_path
 
 
@@ -371,7 +373,7 @@ def run_probe_sets(sets, opts: ProbeOptions = ProbeOptions(), workers=None, sche
             keep = {key(a, s): done[key(a, s)] for a in alphas for s in (False, True)
                     if key(a, s) in done}
             # rewrite the file whole (atomic), so that appends never follow a torn line
-            from .io import atomic_write_bytes
+            from common.io import atomic_write_bytes
             lines = [json.dumps(_checkpoint_header(state, opts))] + [json.dumps(r) for r in keep.values()]
             atomic_write_bytes(checkpoint, ("\n".join(lines) + "\n").encode())
             out.update(keep)
@@ -588,7 +590,7 @@ def plot_probes(rows, out_dir, note=""):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hmodel.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes
+    from common.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes
     from hmodel.probes import arcs
     figs = (("fig15_w2.png", [("w2", r"$W_2$ macro")], r"Normalized second-order work $W_2$"),
             ("fig16_w2_micro.png", [("w2", r"$W_2$ macro"),
@@ -640,7 +642,6 @@ def plot_probes(rows, out_dir, note=""):
         fig.legend(*ax.get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7,
                    frameon=False)
         fig.tight_layout(rect=(0, 0.1, 1, 0.97))
-        tmp = os.path.join(out_dir, ".tmp-" + name)
-        fig.savefig(tmp, dpi=120, format="png")
+        with atomic_open(os.path.join(out_dir, name), "wb") as f:
+            fig.savefig(f, dpi=120, format="png")
         plt.close(fig)
-        os.replace(tmp, os.path.join(out_dir, name))

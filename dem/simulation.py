@@ -13,10 +13,11 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from common.threads import ThreadChooser
+
 from . import kernels
 from .neighbours import build_pair_list, finish_pair_list
 from .params import DemParams
-from .threads import ThreadChooser
 from .walls import Control, wall_stress
 
 

@@ -1,5 +1,5 @@
 """Command line: ``python -m fem biaxial|burst ... --out DIR`` (over fem.biaxial.run_biaxial
-and fem.burst.run_burst), its options from the vocabulary of ``hmodel.options``."""
+and fem.burst.run_burst), its options from the vocabulary of ``common.options``."""
 from __future__ import annotations
 
 import argparse
@@ -9,7 +9,8 @@ import sys
 
 import numpy as np
 
-from hmodel import options as opt
+from common import options as opt
+from hmodel import params as hp
 from hmodel.experiment import compile_kernels
 from hmodel.params import ParamError
 
@@ -60,7 +61,7 @@ def _specimen_options(sub, d: BiaxialConfig, eps1_max: bool):
     add(g, "--d-eps1", d.d_eps1, record=BC,
         note="" if eps1_max else "of the drained path to the start states")
     add(g, "--sigma2", record="HParams", default_text="the p0 of --params FILE, else 200e3")
-    opt.add_param_options(sub)
+    hp.add_param_options(sub)
     g = sub.add_argument_group("imperfection")
     add(g, "--imperfection", "none", record=BC, choices=["none", "spot", "band"])
     add(g, "--imp-size", d.imp_size, record=BC)
@@ -137,13 +138,13 @@ def check_config(cfg: BiaxialConfig) -> None:
     try:
         base = cfg.params()
     except ParamError as e:
-        raise opt.param_option_error(e) from None
+        raise hp.param_option_error(e) from None
     if cfg.imperfection is not None:
         try:
             Imperfection(kind=cfg.imperfection, size=cfg.imp_size, phi_g=cfg.imp_phi_g,
                          alpha0=cfg.imp_alpha0, angle=cfg.imp_angle).params(base)
         except ParamError as e:
-            raise opt.param_option_error(e, {"phi_g": "--imp-phi-g", "alpha0": "--imp-alpha0"}) from None
+            raise hp.param_option_error(e, {"phi_g": "--imp-phi-g", "alpha0": "--imp-alpha0"}) from None
         except ValueError as e:
             raise opt.OptionError(f"--imperfection {cfg.imperfection}: {e}") from None
     if cfg.mesh_file:
@@ -215,8 +216,8 @@ def main(argv=None) -> int:
 
 def _specimen_config(args) -> BiaxialConfig:
     """The specimen of a command: its options, the material from --params FILE (or Table I) with
-    the options given on top (``hmodel.options.params_from``, which sets args.params_note)."""
-    P = opt.params_from(args)
+    the options given on top (``hmodel.params.params_from``, which sets args.params_note)."""
+    P = hp.params_from(args)
     kw = {k: v for k, v in vars(args).items()
           if k in BiaxialConfig.__dataclass_fields__ and k not in MATERIAL}
     if kw["imperfection"] == "none":
@@ -301,7 +302,7 @@ def _run_burst(args, stage) -> int:
 
     stage.at("set-up of the specimen")
     os.makedirs(args.out, exist_ok=True)
-    stage.wrote(opt.record_params(args.out, spec.params(), f"python -m fem burst; {args.params_note}"))
+    stage.wrote(hp.record_params(args.out, spec.params(), f"python -m fem burst; {args.params_note}"))
     try:
         res = run_burst(cfg, args.out, progress=progress)
     except RuntimeError as e:
@@ -321,7 +322,7 @@ def format_burst(rows) -> str:
     """The table of the runs: the c peak (FE, material point), the switch, the outcome and the
     growth measure (``hmodel.burst_rule.energy_release``: the largest (E_c - E_c(0)) / W2_ext
     and the time it passed RELEASE x W2_ext, 'never' when it did not), the energy check."""
-    from hmodel.io import fmt
+    from common.io import fmt
     lines = ["    R      f  switch  eta_switch  c_switch [kPa]  c_peak FE / MP [kPa]  "
              "eta_peak FE / MP   outcome        max (E_c-E_c0)/W2_ext  t_release/T1  t_end/T1  "
              "energy check"]

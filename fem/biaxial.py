@@ -17,11 +17,12 @@ import numba
 import numpy as np
 
 from hmodel import HParams
+from common.io import atomic_write_bytes
+
 from .adapter import stress_to_model, strain_to_model
 from .indicators import GlobalCheck, GlobalCheckProcess, global_w2, local_indicators
 from .mesh import _count, rectangle, from_file
-from hmodel.io import atomic_write_bytes
-from hmodel.options import record_params
+from hmodel.params import record_params
 
 from .output import (CurveWriter, FieldWriter, plot_curve, read_curve, first_events, cell_tensor,
                      nodal_vector, mode_fields, plot_mode)
@@ -82,7 +83,7 @@ class BiaxialConfig:
 
     def validate(self) -> "BiaxialConfig":
         """Every field of the specimen, loading and solver out of its range raises ValueError
-        "field = value is out of range: allowed ..." (``hmodel.options.record_error`` names the
+        "field = value is out of range: allowed ..." (``common.options.record_error`` names the
         option); the material is HParams's (``params()``), the weak zone Imperfection's."""
         def real(v):
             return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)

@@ -36,7 +36,7 @@ import numpy as np
 
 from hmodel.burst_rule import (RELEASE, BurstRule, check_columns, ke_growth, release_columns,
                                release_ratio)
-from hmodel.io import atomic_write_bytes, fmt, save_figure
+from common.io import atomic_write_bytes, fmt, save_figure
 from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS

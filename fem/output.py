@@ -16,13 +16,12 @@ from __future__ import annotations
 
 import csv
 import io
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from hmodel.io import atomic_write_bytes
+from common.io import atomic_write_bytes
 
 __all__ = ["CurveWriter", "FieldWriter", "CURVE_COLUMNS", "MODE_FIELDS", "plot_curve", "read_curve",
            "nodal_vector", "mode_fields", "cell_tensor", "plot_mode"]
@@ -105,10 +104,10 @@ def _writer_class():
         def flush(self, xml: bool = True):
             """Push fields.h5 to the OS and, with ``xml``, rewrite fields.xdmf atomically (same
             XML as meshio's __exit__ would write: Domain = temporal collection + the mesh grid).
-            The XML is replaced (os.replace of a file written beside it), not fsynced: a process
-            that dies leaves the pair complete (the kernel holds both), and an fsync of the XML
-            alone would not make the HDF5 data it points to durable (it cost 3.5 ms a step
-            here)."""
+            The XML is replaced (``common.io.atomic_write_bytes``: a file written beside it), not
+            fsynced: a process that dies leaves the pair complete (the kernel holds both), and an
+            fsync of the XML alone would not make the HDF5 data it points to durable (it cost
+            3.5 ms a step here)."""
             self.h5_file.flush()
             if not xml:
                 return
@@ -119,10 +118,7 @@ def _writer_class():
                     b'CollectionType="Temporal">' % coll.get("Name").encode())
             mesh = b"".join(ET.tostring(g) for g in self.domain if g is not coll)
             data = head + b"".join(self._chunks) + b"</Grid>" + mesh + b"</Domain></Xdmf>"
-            tmp = self.filename.with_name("." + self.filename.name + ".tmp")
-            with open(tmp, "wb") as f:           # an ordinary new file: 0666 less the umask
-                f.write(data)
-            os.replace(tmp, self.filename)
+            atomic_write_bytes(self.filename, data, fsync=False)
 
         def __exit__(self, *_):
             self.flush()

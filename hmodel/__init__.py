@@ -1,5 +1,5 @@
 """H-microdirectional model (Nicot & Darve 2011) as a material point, after Nicot, Hadda & Darve 2013."""
-from .options import listen_for_compilation
+from common.options import listen_for_compilation
 from .params import HParams
 from .material import HState, Increment, reference_state, update, update_full, broadcast_state
 

@@ -17,15 +17,15 @@ import time
 
 import numpy as np
 
+from common import options as opt
+from common.io import atomic_open, fmt, json_safe, write_csv
+
 from . import fit as hfit
-from . import options as opt
 from . import plots
 from .driver import MixedControlError
 from .experiment import (DOMAIN_COLUMNS, DOMAIN_EPS1_MAX, biaxial_columns, biaxial_test,
                          bifurcation_domain, compile_kernels, directional_analysis, probe_columns)
-from .io import atomic_open, fmt, json_safe, write_csv, write_table
-from .options import add_param_options, params_from, record_params
-from .params import ParamError, save_params
+from .params import ParamError, add_param_options, params_from, record_params, save_params
 from .probes import arcs, format_arcs
 
 # where a loss of the static solution is made to happen dynamically
@@ -245,7 +245,7 @@ def cmd_burst(args, stage):
     _say(stage, "writing burst.csv, history.csv, paths.csv, the figures and summary.json")
     os.makedirs(args.out, exist_ok=True)
     pth = lambda n: os.path.join(args.out, n)
-    write_table(pth("burst.csv"), {k: [r[k] for r in res.rows] for k in burst.BURST_COLUMNS})
+    write_csv(pth("burst.csv"), {k: [r[k] for r in res.rows] for k in burst.BURST_COLUMNS}, nan="")
     stage.wrote("burst.csv")
     hist = {k: [] for k in burst.HISTORY_COLUMNS}
     for h in res.histories:
@@ -253,7 +253,7 @@ def cmd_burst(args, stage):
         for k in burst.HISTORY_COLUMNS:
             hist[k].extend([h[k]] * n if k in ("ratio", "start_fraction", "switch")
                            else (range(n) if k == "step" else h[k]))
-    write_table(pth("history.csv"), hist)
+    write_csv(pth("history.csv"), hist, nan="")
     stage.wrote("history.csv")
     pcols = {k: [] for k in burst.PATH_COLUMNS}
     for pi in res.paths:

@@ -36,7 +36,7 @@ def compile_kernels(extra=(), warm=None, stream=None) -> float:
     from . import _kernels
     from .driver import mixed_step
     from .material import update_full
-    from .options import announce_compilation
+    from common.options import announce_compilation
     from .probes import strain_probes
     stream = sys.stderr if stream is None else stream
     kernels = (_kernels.update_serial, _kernels.update_parallel, _kernels.mixed_step_single,

@@ -30,9 +30,10 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from common.io import atomic_open, read_csv, save_figure
+
 from .driver import MixedControlError
 from .experiment import biaxial_test
-from .io import atomic_open, read_csv, save_figure
 from .params import HParams
 
 __all__ = ["FREE_CHOICES", "DEFAULT_FREE", "MIN_POINTS", "Curve", "CurveError", "read_curve",

@@ -1,19 +1,24 @@
 """Parameters of the H-microdirectional model (Table I of Nicot, Hadda & Darve 2013)."""
 from __future__ import annotations
 
+import argparse
 import math
 import numbers
+import os
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-__all__ = ["HParams", "ParamError", "UNITS", "load_params", "save_params"]
+from common.options import VOCABULARY, OptionError, add, option_of
+
+__all__ = ["HParams", "ParamError", "UNITS", "load_params", "save_params", "add_param_options",
+           "params_from", "record_params", "param_option_error", "PARAM_OPTIONS"]
 
 # Grains 2-6 touch when alpha <= 30 deg (l2 = 4 r sin alpha <= 2 r); grains 1-4 when alpha >= 90 deg.
 ALPHA0_MIN_DEG = 30.0
 ALPHA0_MAX_DEG = 90.0
 
-# the unit of every field, as a parameter file records it (hmodel.paramfile)
+# the unit of every field, as a parameter file records it (common.paramfile)
 UNITS = {"kn": "N/m", "kt": "N/m", "phi_g": "deg", "r_g": "m", "alpha0": "deg", "p0": "Pa",
          "thickness": "m", "n_dir": "-", "fabric_a": "-", "fabric_b": "deg"}
 
@@ -129,13 +134,13 @@ def _check(ok, name, allowed, value):
 
 def save_params(path, params: HParams, note: str | None = None) -> None:
     """Write ``params`` as a parameter file (docs/parameters.md; ``thickness`` null: 2 r_g)."""
-    from .paramfile import write_params
+    from common.paramfile import write_params
     write_params(path, params, "hmodel", UNITS, note)
 
 
 def load_params(path, option: str = "--params") -> HParams:
     """The HParams of a parameter file; ValueError of one line naming the file and the key."""
-    from .paramfile import read_params
+    from common.paramfile import read_params
 
     def build(values):
         try:
@@ -143,3 +148,63 @@ def load_params(path, option: str = "--params") -> HParams:
         except ParamError as e:
             raise ValueError(f"{e.name} = {e.value!r} is out of range: allowed {e.allowed}") from None
     return read_params(path, HParams, "hmodel", UNITS, build, option)
+
+
+# -- the command-line options of the parameters (the options themselves: common.options) --------
+def param_option_error(e, options=None):
+    """The OptionError of an HParams ``ParamError`` ``e``, naming the command-line option of the
+    field (``--phi-g`` for phi_g, ``--sigma2`` for p0, or ``options[field]``)."""
+    opt = (options or {}).get(e.name) or option_of("HParams", e.name)
+    return OptionError(f"{opt} {e.value!r} is out of range: allowed {e.allowed}")
+
+
+# the options of the HParams fields (p0 is the confining stress of a test: --sigma2)
+PARAM_OPTIONS = tuple((t.name, f.split(".", 1)[1]) for t in VOCABULARY.values() for f in t.fields
+                      if f.startswith("HParams.") and f != "HParams.p0")
+
+
+def add_param_options(ap: argparse.ArgumentParser):
+    """--params FILE and an option for every HParams field but p0 (the commands' --sigma2), all
+    None unless given: the file (or Table I) supplies the rest (``params_from``), HParams checks
+    them."""
+    d = HParams()
+    g = ap.add_argument_group("model parameters (Table I unless --params FILE; an option given "
+                              "overrides the file)")
+    add(g, "--params", metavar="FILE", note="of the H-model: python -m hmodel params --out FILE",
+        default_text="Table I")
+    for option, name in PARAM_OPTIONS:
+        add(g, option, record="HParams", metavar=name.upper(),
+            default_text=f"the file's, else Table I's "
+                         f"{'null (2 r_g)' if getattr(d, name) is None else format(getattr(d, name), 'g')}")
+
+
+def params_from(args, p0=None):
+    """The HParams of a command: the --params file (or Table I), then the options given on top;
+    p0 is ``p0`` if given, else --sigma2 when given as one value (the confining stress of the
+    test: it overrides the file's p0), else the file's. Sets ``args.params_note``, the line of
+    the run's summary that says where the values came from ("parameters: the file p.json;
+    --phi-g 25 overrides the file's phi_g 20"). A bad file or an option out of range is a
+    ValueError (OptionError) of one line naming the key or the option."""
+    from common.paramfile import override
+    path = getattr(args, "params", None)
+    base = load_params(path) if path else HParams()
+    given = [(o, n, getattr(args, n)) for o, n in PARAM_OPTIONS if getattr(args, n, None) is not None]
+    sigma2 = getattr(args, "sigma2", None)
+    if p0 is not None:
+        given.append(("p0", "p0", float(p0)))
+    elif isinstance(sigma2, (int, float)):
+        given.append(("--sigma2", "p0", float(sigma2)))
+    try:
+        P, note = override(base, given, f"the file {path}" if path else "Table I (defaults)",
+                           base.replace)
+    except ParamError as e:
+        raise param_option_error(e) from None
+    args.params_note = note
+    return P
+
+
+def record_params(out_dir, params, note="") -> str:
+    """Write ``params`` to ``out_dir``/params.json (the --params format: the run repeats with
+    ``--params out_dir/params.json``); returns the file name."""
+    save_params(os.path.join(out_dir, "params.json"), params, note)
+    return "params.json"

@@ -1,7 +1,7 @@
 """Checks of a drawn matplotlib figure, shared by the tests of the figures (issue 32: "figures
 that agree with their reports").
 
-A figure is caught as it is saved (``catch``: the project's one writer ``hmodel.io.save_figure``
+A figure is caught as it is saved (``catch``: the project's one writer ``common.io.save_figure``
 still writes the PNG, and the figure is kept), drawn once at its saving dpi (``draw``), and read
 back from matplotlib, in display pixels from the renderer:
 
@@ -31,11 +31,11 @@ SAVE_DPI = 120
 
 
 def catch(monkeypatch):
-    """{file name: figure} of every figure saved through ``hmodel.io.save_figure`` (written as
+    """{file name: figure} of every figure saved through ``common.io.save_figure`` (written as
     usual, and kept for the checks), also where a module imported the writer by name."""
-    import hmodel.io
+    import common.io
     import hmodel.plots
-    real = hmodel.io.save_figure
+    real = common.io.save_figure
     caught = {}
 
     def keep(fig, path, dpi=SAVE_DPI):
@@ -43,7 +43,7 @@ def catch(monkeypatch):
         fig._saved_dpi = dpi
         caught[str(path).replace("\\", "/").rsplit("/", 1)[-1]] = fig
 
-    monkeypatch.setattr(hmodel.io, "save_figure", keep)
+    monkeypatch.setattr(common.io, "save_figure", keep)
     monkeypatch.setattr(hmodel.plots, "save_figure", keep)
     return caught
 

@@ -5,7 +5,7 @@ Each file of docs/examples/ runs in a subprocess from an empty folder outside th
 writes only there. docs/api.md must show every example whole, in a ```python block after its
 link, so that the page cannot drift from the code that runs. And a script run from another
 folder compiles nothing that a run from the repository's root compiled already: one copy of
-the code, one cache of kernels (the compile notice, hmodel.options.COMPILE_NOTICE, is printed
+the code, one cache of kernels (the compile notice, common.options.COMPILE_NOTICE, is printed
 at any compilation).
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from hmodel.options import COMPILE_NOTICE
+from common.options import COMPILE_NOTICE
 from tests._interrupt import HANG_S
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,6 +1,6 @@
 """Every subcommand's parser, walked: exact options, the same run options everywhere.
 
-The CLIs (hmodel, fem, dem and the cross-check above them) build their parsers with ``hmodel.options.Parser``: no prefix matching (argparse
+The CLIs (hmodel, fem, dem and the cross-check above them) build their parsers with ``common.options.Parser``: no prefix matching (argparse
 would take ``--sigma`` for ``--sigma2`` and run), an unknown option refused by the subcommand
 that got it, naming the options it resembles and that subcommand's own ``--help``. Commands that
 show progress take ``--quiet``; the long DEM commands take ``--workers``, ``--resume`` and
@@ -12,7 +12,7 @@ import argparse
 
 import pytest
 
-from hmodel.options import OptionError
+from common.options import OptionError
 
 CLIS = ("hmodel", "fem", "dem", "crosscheck")
 
@@ -150,7 +150,7 @@ def test_fit_dem_parser_is_exact_with_quiet(monkeypatch):
     """`python -m crosscheck.fit` (formerly `python -m dem.crosscheck_fit`; one command, no
     subcommands) follows the same rules."""
     import crosscheck.fit.__main__ as fd
-    import hmodel.options as opt
+    import common.options as opt
     seen = {}
     monkeypatch.setattr(opt, "run_cli", lambda parser, *a, **k: seen.setdefault("parser", parser) and 0)
     fd.main([])
@@ -253,9 +253,9 @@ def _options(sub):
 
 @pytest.mark.parametrize("module,name", ALL)
 def test_every_option_is_in_the_vocabulary_with_help_unit_and_default(module, name):
-    """The parsers are built from hmodel.options.VOCABULARY: every option is a term of it, its
+    """The parsers are built from common.options.VOCABULARY: every option is a term of it, its
     help says what it is, the unit of a quantity in brackets, and its default (or "required")."""
-    from hmodel.options import VOCABULARY
+    from common.options import VOCABULARY
     sub = subcommands(build(module))[name]
     bad = []
     for option, a in _options(sub):
@@ -276,7 +276,7 @@ def test_every_option_is_in_the_vocabulary_with_help_unit_and_default(module, na
 
 
 def test_every_quantity_has_a_unit_and_every_switch_is_positive_or_no():
-    from hmodel.options import VOCABULARY
+    from common.options import VOCABULARY
     for t in VOCABULARY.values():
         if t.kind in ("real", "reals"):
             assert t.unit, f"{t.name} is a quantity with no unit ('-' if dimensionless)"
@@ -342,7 +342,7 @@ def test_the_out_rule(module, name):
 def test_every_former_name_says_its_new_one():
     """Every former name of the vocabulary, in every command that has its new name: one line
     naming the new name."""
-    from hmodel.options import VOCABULARY
+    from common.options import VOCABULARY
     checked = 0
     for t in VOCABULARY.values():
         for old, commands in t.old:
@@ -377,7 +377,7 @@ def test_top_help_describes_the_commands(module, capsys):
 
 def test_record_errors_name_the_option():
     """A value a record refuses is named by its option (the record's field never shows)."""
-    from hmodel.options import record_error
+    from common.options import record_error
     from dem.burst import BurstOptions
     from dem.params import DemParams
     from dem.probes import ProbeOptions

@@ -4,7 +4,7 @@ After the README's set-up (an editable install), ``python -m ...`` from the repo
 a script anywhere else import the same files, so Numba's cache (beside the sources) serves both
 (tests/test_api_examples.py checks that a script run elsewhere compiles nothing the root has
 compiled). A library call that compiles a kernel of hmodel, fem or dem says so once on stderr
-(``hmodel.options.listen_for_compilation``), as the CLI does before its run.
+(``common.options.listen_for_compilation``), as the CLI does before its run.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numba
 import pytest
 
 import hmodel  # noqa: F401  (registers the listener)
-from hmodel import options
+from common import options
 from tests._interrupt import HANG_S
 
 ROOT = Path(__file__).resolve().parents[1]

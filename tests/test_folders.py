@@ -15,7 +15,7 @@ import os
 
 import pytest
 
-from hmodel.options import OWNER_FILE, Stage, folder_owner, snapshot
+from common.options import OWNER_FILE, Stage, folder_owner, snapshot
 
 # the material point's biaxial test, small: 20 steps of 16 orientations (a second)
 HBIAXIAL = ["biaxial", "--eps1-max", "0.002", "--d-eps1", "1e-4", "--n-dir", "16", "--quiet"]

@@ -1,10 +1,11 @@
-"""The import graph of the three parts and the cross-check above them, read from their source
-(``ast``): no circle of imports, dem imports nothing of fem, and none of hmodel, fem and dem
-imports the cross-check (``crosscheck``, which imports all three).
+"""The import graph of the three parts, the ground floor below them and the cross-check above
+them, read from their source (``ast``): no circle of imports, dem imports nothing of fem, none
+of hmodel, fem and dem imports the cross-check (``crosscheck``, which imports all three), and
+the ground floor (``common``) imports none of them. And no module sets the process umask.
 
 Every ``import`` and ``from ... import`` counts, at module level and inside functions alike (an
 import inside a function only hides a circle: it closes at the first call). An import names a
-module of ``hmodel``, ``fem``, ``dem`` or ``crosscheck`` (others are left out): ``from pkg import name`` is an
+module of ``common``, ``hmodel``, ``fem``, ``dem`` or ``crosscheck`` (others are left out): ``from pkg import name`` is an
 edge to ``pkg.name`` where that is a module of its own, else to ``pkg`` (its ``__init__``). The
 implicit import of a module's parent packages is not an edge (every module would be in a circle
 with its package's ``__init__``)."""
@@ -14,9 +15,11 @@ import ast
 import os
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-PACKAGES = ("hmodel", "fem", "dem", "crosscheck")
+PACKAGES = ("common", "hmodel", "fem", "dem", "crosscheck")
 # the three parts, below the cross-check
 PARTS = ("hmodel", "fem", "dem")
+# the ground floor, below the three parts
+GROUND = "common"
 
 
 def _modules() -> dict[str, str]:
@@ -145,6 +148,35 @@ def test_no_part_imports_the_crosscheck():
     assert not bad, "\n".join(bad)
 
 
+def test_the_ground_floor_imports_no_part():
+    """common is below everything: it imports none of hmodel, fem, dem and crosscheck."""
+    graph = import_graph()
+    bad = sorted(f"{m} ({line}) imports {t}" for m, edges in graph.items() for t, line in edges.items()
+                 if m.split(".")[0] == GROUND and t.split(".")[0] != GROUND)
+    assert not bad, "\n".join(bad)
+
+
+def test_no_module_sets_the_umask():
+    """The umask is the process's, shared by every thread: setting it even for a moment (to read
+    it) races with any other thread creating a file. No module of the packages, the benchmarks
+    or the examples calls ``os.umask`` (``common.io`` reads it from /proc, and creates files
+    with mode 0666 so that the kernel takes it off); only the tests set it, to test modes."""
+    bad = []
+    for top in PACKAGES + ("bench", os.path.join("docs", "examples"), os.path.join("docs", "reference")):
+        for dirpath, dirnames, filenames in os.walk(os.path.join(ROOT, top)):
+            dirnames[:] = [d for d in dirnames if d != "__pycache__"]
+            for f in filenames:
+                if f.endswith(".py"):
+                    path = os.path.join(dirpath, f)
+                    with open(path, encoding="utf-8") as fh:
+                        tree = ast.parse(fh.read(), filename=path)
+                    for node in ast.walk(tree):
+                        if isinstance(node, ast.Call) and "umask" in (
+                                getattr(node.func, "attr", None), getattr(node.func, "id", None)):
+                            bad.append(f"{os.path.relpath(path, ROOT)}:{node.lineno}")
+    assert not bad, "calls of umask: " + ", ".join(bad)
+
+
 def test_the_graph_is_read():
     """The reading itself: relative, absolute and in-function imports, packages and modules."""
     graph = import_graph()
@@ -156,6 +188,9 @@ def test_the_graph_is_read():
     assert "hmodel.driver" in graph["hmodel.experiment"]
     assert "fem.biaxial" in graph["crosscheck.parts"]              # from fem.biaxial import, in a function
     assert "crosscheck.burst.report" in graph["crosscheck.report"]  # from .burst.report import
+    assert "common.io" in graph["common.options"]                  # from .io import, in a function
+    assert "common.io" in graph["dem.io"]                          # from common.io import
+    assert "common.threads" in graph["fem.indicators.local"]
 
 
 def test_a_circle_is_found():

@@ -306,7 +306,7 @@ def test_a_stale_page_and_a_gap_are_found(built, monkeypatch):
     def more():
         ap = real()
         sub = [a for a in ap._actions if a.__class__.__name__ == "_SubParsersAction"][0]
-        MAKE_add = __import__("hmodel.options", fromlist=["add"]).add
+        MAKE_add = __import__("common.options", fromlist=["add"]).add
         MAKE_add(sub.choices["biaxial"], "--smooth", 0.001)
         return ap
     monkeypatch.setattr(hcli, "build_parser", more)

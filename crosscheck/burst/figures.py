@@ -22,7 +22,7 @@ def w2_path_figure(out, parts: dict, name="fig_burst_w2_path.png") -> str | None
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from hmodel.io import save_figure
+    from common.io import save_figure
     color = {"hmodel": "C0", "fem": "C1", "dem": "C3"}
     style = {"hmodel": "-", "fem": "--", "dem": "o-"}
     fig, ax = plt.subplots(figsize=(7.5, 5))
@@ -59,7 +59,7 @@ def burst_figure(out, parts: dict, name="fig_burst_ke.png") -> str:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from hmodel.io import save_figure
+    from common.io import save_figure
     from hmodel.plots import END_MARK
     color = {"hmodel": "C0", "fem": "C1", "dem": "C3"}
     fig, ax = plt.subplots(figsize=(7.5, 5))
@@ -105,7 +105,7 @@ def burst_eq1_figure(out, fem_history, dem_history, name="fig_burst_eq1.png") ->
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from hmodel.io import save_figure
+    from common.io import save_figure
 
     def past(path):
         if not path or not os.path.exists(path):
@@ -130,7 +130,7 @@ def burst_eq1_figure(out, fem_history, dem_history, name="fig_burst_eq1.png") ->
                 (-dm["w2_int"], r"$-W_2^{int}$", "C3", 1.4),
                 (dm["w_damp"], r"$W_{damp}$ (Cundall damping)", "C2", 1.4),
                 (dm["u0"], r"$U_0$", "C4", 1.0)])]
-    from hmodel.plots import symlog_axis
+    from common.plots import symlog_axis
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.0), layout="constrained")
     for ax, (title, t, terms) in zip(axes, panels):
         for y, lab, col, lw in terms:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 import sys
 
-from hmodel import options as opt
+from common import options as opt
 
 PROG = "python -m crosscheck.fit"
 

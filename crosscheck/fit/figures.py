@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from hmodel.io import save_figure
+from common.io import save_figure
 
 __all__ = ["comparison_figures", "direction_figures"]
 

@@ -21,8 +21,8 @@ from hmodel import fit as hfit
 from hmodel.cli import write_domain, write_fit, write_probes
 from hmodel.experiment import biaxial_test, bifurcation_domain, directional_analysis
 from hmodel.fit import _jsonable
-from hmodel.io import atomic_open, read_csv, write_csv
-from hmodel.options import Stage
+from common.io import atomic_open, read_csv, write_csv
+from common.options import Stage
 from hmodel.params import HParams
 
 from .compare import compare, read_dem_domain, second_optimum

@@ -17,10 +17,9 @@ from .linalg import det_sign, lam_min_sym, one_blas_thread, permutation_parity, 
 from .local import fibonacci_sphere, local_indicators, mandel
 from .process import GlobalCheckProcess
 # The Numba kernels of the modules, named here too: ``fem.__main__._fem_kernels`` finds the
-# kernels to compile ahead of a run in this namespace. The tests call some of them, and the
-# local kernels' thread chooser, from here.
+# kernels to compile ahead of a run in this namespace. The tests call some of them from here.
 from .linalg import _band_ldlt, _band_solve, _parity                    # noqa: F401
-from .local import _ThreadChoice, _rice_kernel, _w2_min_kernel, _w2_one  # noqa: F401
+from .local import _rice_kernel, _w2_min_kernel, _w2_one  # noqa: F401
 
 __all__ = ["permutation_parity", "det_sign", "symmetric_inertia", "lam_min_sym", "GlobalCheck",
            "GlobalCheckProcess",

@@ -7,7 +7,8 @@ npts) in the orthonormal Mandel basis (e11, e22, sqrt(2) e12), where eps : D : e
 - Rice's indicator min over unit n of det(A(n)), A_jk = n_i D_ijkl n_l (acoustic tensor), sampled
   over n at angles in [0, pi).
 
-The kernels run on 1 or all Numba threads, whichever is faster here and now (``_ThreadChoice``).
+The kernels run on 1 or all Numba threads, whichever is faster here and now
+(``common.threads.ThreadChooser``).
 """
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ import time
 
 import numba
 import numpy as np
+
+from common.threads import ThreadChooser
 
 __all__ = ["mandel", "fibonacci_sphere", "local_indicators"]
 
@@ -208,35 +211,9 @@ def local_indicators(D: np.ndarray, n_sphere: int = 600, n_angles: int = 180,
     return out
 
 
-class _ThreadChoice:
-    """Which of 1 and n_max Numba threads runs the local kernels faster here and now: the wall
-    time per point of every call (running mean), the slower count re-tried every ``retry`` calls
-    (the load of a shared machine moves). On 2 cores with one kept busy by another process, two
-    threads wait for each other (measured 5-22 ms a 3200-point step against 8.2 ms on one
-    thread; 5.0 ms when idle). The points are independent: the same bits for any count."""
-
-    def __init__(self, retry: int = 16):
-        self.retry = retry
-        self.t = {}
-        self.calls = 0
-        self.warm = False          # the first call loads the compiled kernels: not timed
-
-    def pick(self, n_max: int) -> int:
-        if n_max <= 1:
-            return 1
-        for n in (1, n_max):
-            if n not in self.t:
-                return n
-        self.calls += 1
-        best, other = sorted((1, n_max), key=self.t.get)
-        return other if self.calls % self.retry == 0 else best
-
-    def record(self, n: int, seconds_per_point: float) -> None:
-        if not self.warm:
-            self.warm = True
-            return
-        old = self.t.get(n)
-        self.t[n] = seconds_per_point if old is None else 0.5 * (old + seconds_per_point)
-
-
-_LOCAL_THREADS = _ThreadChoice()
+# the local kernels' thread count: the faster of 1 and all Numba threads by the running mean of
+# the wall time per point of every call, the slower re-tried every 16 calls (the load of a shared
+# machine moves). On 2 cores with one kept busy by another process, two threads wait for each
+# other (measured 5-22 ms a 3200-point step against 8.2 ms on one thread; 5.0 ms when idle). The
+# points are independent: the same bits for any count.
+_LOCAL_THREADS = ThreadChooser(retry=16)

@@ -52,7 +52,7 @@ def test_a_folder_of_the_former_command_is_the_new_ones(tmp_path):
     crosscheck` without --force; another command's folder is refused as before."""
     import json
 
-    from hmodel.options import OptionError, check_owner, folder_owner
+    from common.options import OptionError, check_owner, folder_owner
     old, other = tmp_path / "old", tmp_path / "other"
     for d, command in ((old, "python -m dem crosscheck"), (other, "python -m dem biaxial")):
         d.mkdir()

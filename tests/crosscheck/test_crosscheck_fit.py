@@ -28,7 +28,7 @@ def test_the_fitted_record_reaches_the_probes_and_the_domain_unchanged(tmp_path,
     domain at the record's confining stress, and both folders record the record."""
     import crosscheck.fit.run as run
     from hmodel.experiment import biaxial_test
-    from hmodel.io import read_csv
+    from common.io import read_csv
 
     class Fitted:              # what fit_curve returns, as far as run_fit reads it
         status, reason, params = "fitted", None, FITTED

@@ -18,7 +18,7 @@ from dem.anatomy import (ANATOMY_COLUMNS, INWARD, SLIDE_TOL, ContactState, anato
                          wall_velocities, write_anatomy_vtk)
 from dem.params import DemParams
 from dem.simulation import Simulation
-from dem.threads import ThreadChooser
+from common.threads import ThreadChooser
 from dem.walls import strain_rate
 from tests.dem.test_kernel_reference import _law
 

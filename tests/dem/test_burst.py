@@ -11,7 +11,7 @@ from dem.anatomy import contact_state, contact_work
 from dem.burst import BurstOptions, below_row, hold, scan_peak, wall_work
 from dem.probes import state_fingerprint
 from dem.simulation import Simulation
-from dem.threads import ThreadChooser
+from common.threads import ThreadChooser
 from dem.walls import TIED, strain_rate, tied
 
 R = -2.0

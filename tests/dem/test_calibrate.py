@@ -147,7 +147,7 @@ def _synthetic_task(a):
            "porosity": 0.16, "compaction_converged": True, "steps": 1000, "wall_time": 0.01}
     if a.get("crash_after_result") and a["work_dir"]:
         # as if the process were killed after it finished, before the main process logged it
-        from dem.io import atomic_write_bytes
+        from common.io import atomic_write_bytes
         atomic_write_bytes(os.path.join(a["work_dir"], "result.json"), json.dumps(res).encode())
     return res
 

@@ -221,7 +221,7 @@ def test_a_long_run_rebuilds_the_list_at_the_steps_single_steps_do(small_sample)
     # call of 1500 steps (one thread, fixed: one kernel call but for the rebuilds) must rebuild
     # at the same steps as 1500 calls of one step, with the same bits. A kernel that let the
     # disks run further (a stale list: pairs coming into contact unlisted) rebuilds less often.
-    from dem.threads import ThreadChooser
+    from common.threads import ThreadChooser
     runs = []
     for calls in ([1] * 1500, [1500]):
         sim = Simulation(small_sample)

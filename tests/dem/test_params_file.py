@@ -1,5 +1,5 @@
 """Parameter files: `dem params` writes the full DemParams with units (the format shared with the
-H-model, hmodel.paramfile), every dem command reads one, options override it and the run says so,
+H-model, common.paramfile), every dem command reads one, options override it and the run says so,
 the output folders record their parameters in the same format, files of the format before units
 still load, and a state refuses parameters that are not its own."""
 import json

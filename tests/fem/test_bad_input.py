@@ -10,7 +10,7 @@ import pytest
 import fem.__main__ as fcli
 from fem.biaxial import BiaxialConfig, run_biaxial
 from fem.output import plot_curve, read_curve
-from hmodel.io import file_mode
+from common.io import file_mode
 from tests._interrupt import interrupt_after
 
 

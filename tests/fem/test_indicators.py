@@ -271,7 +271,7 @@ def test_local_thread_choice_takes_the_faster_and_retries():
     """The local kernels' thread count: each count is tried once (after an untimed warm-up
     call), then the faster one, the slower re-tried every ``retry`` calls, so a change of load is
     followed; one thread when only one is allowed."""
-    from fem.indicators import _ThreadChoice
+    from common.threads import ThreadChooser as _ThreadChoice
     c = _ThreadChoice(retry=4)
     assert c.pick(1) == 1
     c.record(1, 99.0)                       # warm-up: not timed

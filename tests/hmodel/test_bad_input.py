@@ -13,10 +13,10 @@ import hmodel.cli as cli
 from hmodel import HParams, broadcast_state, update
 from hmodel.driver import drained_biaxial, isotropic_state, run_path
 from hmodel.experiment import DOMAIN_COLUMNS, domain_point
-from hmodel.io import write_csv
+from common.io import write_csv
 from hmodel.material import take_points
 from hmodel.params import ParamError
-from hmodel.options import announce_compilation
+from common.options import announce_compilation
 from tests._interrupt import HANG_S, interrupt_after
 
 
@@ -206,7 +206,7 @@ _SIGNAL_IN_NUMBA_CALLBACK = r"""
 import os, signal, sys
 import numpy as np, numba
 import numba.core.serialize as S
-from hmodel.options import Parser, run_cli
+from common.options import Parser, run_cli
 
 @numba.njit
 def two_arrays(a):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hmodel.cli import main
-from hmodel.io import read_csv
+from common.io import read_csv
 
 
 def test_biaxial_cli(tmp_path, capsys):

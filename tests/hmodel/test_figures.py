@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hmodel import plots
-from hmodel.io import fmt
+from common.io import fmt
 
 
 @pytest.fixture
@@ -82,6 +82,7 @@ def test_cone_through_zero_degrees():
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from common import plots
     assert plots._arc_text([[350.0, 370.0]]) == "350.0°-10.0°"
     a = np.arange(0.0, 360.0, 1.0)
     w = np.where((a >= 350) | (a <= 10), -0.05, 0.5)

@@ -19,7 +19,7 @@ from hmodel import HParams
 from hmodel.experiment import biaxial_columns, biaxial_test
 from hmodel.fit import (CurveError, _covariance, _Problem, curve_check, fit_curve, jacobian,
                         make_curve, model_curve, structural_reduction)
-from hmodel.io import read_csv, write_csv
+from common.io import read_csv, write_csv
 from tests._interrupt import interrupt_after
 from tests.hmodel.test_bad_input import _refused
 

@@ -10,7 +10,7 @@ import pytest
 import hmodel.cli as cli
 from hmodel import HParams
 from hmodel.driver import MixedControlError, drained_biaxial, isotropic_state, run_path
-from hmodel.io import read_csv
+from common.io import read_csv
 from tests._interrupt import interrupt_after
 
 JUMP = ["--phi-g", "40", "--alpha0", "55"]       # the published failure (discontinuous at 0.2 %)

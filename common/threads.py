@@ -1,4 +1,19 @@
-"""How many threads a run uses: a fixed count, or ``auto`` (the default).
+"""How many threads a run uses: a fixed count, or ``auto`` (the default); the one thread
+chooser of the project (``ThreadChooser``): dem's simulation steps and fem's local indicators.
+
+The rule of both: more threads never make a run much slower than one.  Only measured wall
+times decide between 1 and all threads, the slower choice is re-tried now and then (the load of
+a shared machine moves), and the first call of each is not a measure (it loads the kernels).
+The results do not depend on the choice (the same bits for any thread count).  Two ways to pace
+the re-trials, for two kinds of work:
+
+* a run of many steps that can be cut into chunks (dem: ``next(left)`` gives the thread count
+  and the chunk, ``record(threads, units, seconds)`` its measure): by the clock, as follows;
+* a kernel called whole, many times (fem's local indicators, a step of a biaxial run:
+  ``pick(n_max)`` and ``record(threads, seconds_per_unit)``): the faster by the running mean of
+  its time per unit of work, the slower re-tried every ``retry`` calls.
+
+By the clock (dem):
 
 The kernel gives the same bits for any number of disk blocks (``kernels._block_step``), so the
 thread count is a pure speed choice and may change between two calls of ``kernels.advance``.
@@ -66,25 +81,38 @@ def set_default_threads(threads):
 
 
 class ThreadChooser:
-    """Chooses the thread count of each ``advance`` call (see the module docstring).
+    """Chooses the thread count of each call (see the module docstring).
 
-    Only measured rates decide: the current choice runs full chunks; the other one runs a
-    ``TRIAL_STEPS`` chunk when its retry time has come (or at once, when the current choice
-    has become slower than the other's last measurement), and takes over only if that
-    trial is faster."""
+    ``ThreadChooser(n_disks, threads)`` (paced by the clock, dem): ``threads`` a fixed count,
+    None the default (``set_default_threads``: auto unless set); ``next(left)`` and
+    ``record(threads, units, seconds)``.  Only measured rates decide: the current choice runs
+    full chunks; the other one runs a ``TRIAL_STEPS`` chunk when its retry time has come (or at
+    once, when the current choice has become slower than the other's last measurement), and
+    takes over only if that trial is faster.
 
-    def __init__(self, n_disks: int, threads=None):
-        threads = _default if threads is None else threads
+    ``ThreadChooser(retry=k)`` (paced by calls, fem's local indicators: always auto, whatever the
+    default): ``pick(n_max)`` the count of the next call among 1 and ``n_max``, and
+    ``record(threads, seconds_per_unit)``; each count is tried once after an untimed first call,
+    then the faster by the running mean of its time per unit, the slower re-tried every ``k``
+    calls."""
+
+    def __init__(self, n_disks: int | None = None, threads=None, retry: int | None = None):
+        self.retry = retry          # None: re-trials paced by the clock; k: every k calls
+        if retry is None:
+            threads = _default if threads is None else threads
         self.fixed = check_threads(threads) if threads is not None else None
         self.max_threads = available_threads()
-        self.adaptive = self.fixed is None and n_disks >= SERIAL_BELOW and self.max_threads > 1
+        self.adaptive = (self.fixed is None and (n_disks is None or n_disks >= SERIAL_BELOW)
+                         and self.max_threads > 1)
         self.current = self.fixed or 1
-        self.rate = {}              # threads -> last measured particle-steps/s
+        self.rate = {}              # threads -> last measured units/s (by the clock)
         self.retry_at = {}          # threads -> wall time of its next trial
         self.retry_s = {}           # threads -> current retry interval [s]
         self.trials = 0             # trial chunks run (reported by the bench)
-        self.warm = set()           # thread counts whose first (unmeasured) chunk has run
+        self.warm = set()           # thread counts whose first (unmeasured) call has run
         self.span = 2 * TRIAL_STEPS  # steps of the next chunk on all threads (doubles)
+        self.t = {}                 # threads -> running mean of seconds per unit (by calls)
+        self.calls = 0              # calls since both counts were measured (by calls)
 
     def _other(self, k):
         return self.max_threads if k == 1 else 1
@@ -103,8 +131,27 @@ class ThreadChooser:
             return self.current, min(left, self.span)
         return self.current, left
 
-    def record(self, threads: int, particle_steps: int, seconds: float):
-        """Rate of the chunk just run with ``threads`` threads."""
+    def pick(self, n_max: int) -> int:
+        """The thread count of the next call, among 1 and ``n_max`` (paced by calls)."""
+        if self.fixed is not None:
+            return min(self.fixed, n_max)
+        if n_max <= 1:
+            return 1
+        for n in (1, n_max):
+            if n not in self.t:
+                return n
+        self.calls += 1
+        best, other = sorted((1, n_max), key=self.t.get)
+        return other if self.calls % self.retry == 0 else best
+
+    def record(self, threads: int, units, seconds=None):
+        """The measure of the call just run with ``threads`` threads: ``units`` of work (steps
+        x disks) in ``seconds`` (by the clock), or (paced by calls) ``units`` the seconds per
+        unit of work."""
+        if self.retry is not None:
+            self._record_per_unit(threads, units)
+            return
+        particle_steps = units
         if not self.adaptive or particle_steps <= 0:
             return
         if threads not in self.warm:                       # warm-up chunk: not a measure
@@ -133,3 +180,10 @@ class ThreadChooser:
             self.retry_at[self._other(threads)] = now
         elif threads != 1:
             self.span *= 2                                 # all threads confirmed: longer chunks
+
+    def _record_per_unit(self, threads: int, seconds_per_unit: float) -> None:
+        if not self.warm:                # the first call loads the compiled kernels: not timed
+            self.warm.add(threads)
+            return
+        old = self.t.get(threads)
+        self.t[threads] = seconds_per_unit if old is None else 0.5 * (old + seconds_per_unit)

@@ -1,5 +1,5 @@
 """Parameter files: one JSON format for the H-model's ``HParams`` and the DEM's ``DemParams``
-(docs/parameters.md), read and written here for both packages (dem imports it).
+(docs/parameters.md), read and written here for both (hmodel.params and dem.params).
 
 A file is one JSON object: ``"model"`` ("hmodel" or "dem"), every field of the parameter record
 by its own name with its value in SI units (angles in degrees), ``"units"`` (field -> unit, a

@@ -1,7 +1,8 @@
-"""What the hmodel, fem and dem command lines share: one vocabulary of options, one-line errors,
-checked option types, output folders and memory checked before any computation, Ctrl-C /
-SIGTERM as one line, and the model parameters of a command (``add_param_options``,
-``params_from``, ``record_params``: --params FILE with the options on top, docs/parameters.md).
+"""What the hmodel, fem and dem command lines (and the cross-check's) share: one vocabulary of
+options, one-line errors, checked option types, output folders and memory checked before any
+computation, Ctrl-C / SIGTERM as one line. The options of the H-model's parameters (--params
+FILE with the options on top, docs/parameters.md) are the H-model's: ``hmodel.params``
+(``add_param_options``, ``params_from``, ``record_params``), dem's ``dem.params``.
 
 The vocabulary (``VOCABULARY``, issue 32) is written once: every option of the three parts, by
 name, with the quantity it is (in the paper's symbols), its unit, its kind and the range the
@@ -637,68 +638,6 @@ def check_memory(nbytes, what, options, allowed="a smaller run"):
     if avail is not None and nbytes > avail:
         raise OptionError(f"{options}: {what} would need about {nbytes / 1e9:.3g} GB of memory, "
                           f"{avail / 1e9:.3g} GB available: allowed {allowed}")
-
-
-def param_option_error(e, options=None):
-    """The OptionError of an HParams ``ParamError`` ``e``, naming the command-line option of the
-    field (``--phi-g`` for phi_g, ``--sigma2`` for p0, or ``options[field]``)."""
-    opt = (options or {}).get(e.name) or option_of("HParams", e.name)
-    return OptionError(f"{opt} {e.value!r} is out of range: allowed {e.allowed}")
-
-
-# the options of the HParams fields (p0 is the confining stress of a test: --sigma2)
-PARAM_OPTIONS = tuple((t.name, f.split(".", 1)[1]) for t in VOCABULARY.values() for f in t.fields
-                      if f.startswith("HParams.") and f != "HParams.p0")
-
-
-def add_param_options(ap: argparse.ArgumentParser):
-    """--params FILE and an option for every HParams field but p0 (the commands' --sigma2), all
-    None unless given: the file (or Table I) supplies the rest (``params_from``), HParams checks
-    them."""
-    from .params import HParams
-    d = HParams()
-    g = ap.add_argument_group("model parameters (Table I unless --params FILE; an option given "
-                              "overrides the file)")
-    add(g, "--params", metavar="FILE", note="of the H-model: python -m hmodel params --out FILE",
-        default_text="Table I")
-    for option, name in PARAM_OPTIONS:
-        add(g, option, record="HParams", metavar=name.upper(),
-            default_text=f"the file's, else Table I's "
-                         f"{'null (2 r_g)' if getattr(d, name) is None else format(getattr(d, name), 'g')}")
-
-
-def params_from(args, p0=None):
-    """The HParams of a command: the --params file (or Table I), then the options given on top;
-    p0 is ``p0`` if given, else --sigma2 when given as one value (the confining stress of the
-    test: it overrides the file's p0), else the file's. Sets ``args.params_note``, the line of
-    the run's summary that says where the values came from ("parameters: the file p.json;
-    --phi-g 25 overrides the file's phi_g 20"). A bad file or an option out of range is a
-    ValueError (OptionError) of one line naming the key or the option."""
-    from .paramfile import override
-    from .params import HParams, ParamError, load_params
-    path = getattr(args, "params", None)
-    base = load_params(path) if path else HParams()
-    given = [(o, n, getattr(args, n)) for o, n in PARAM_OPTIONS if getattr(args, n, None) is not None]
-    sigma2 = getattr(args, "sigma2", None)
-    if p0 is not None:
-        given.append(("p0", "p0", float(p0)))
-    elif isinstance(sigma2, (int, float)):
-        given.append(("--sigma2", "p0", float(sigma2)))
-    try:
-        P, note = override(base, given, f"the file {path}" if path else "Table I (defaults)",
-                           base.replace)
-    except ParamError as e:
-        raise param_option_error(e) from None
-    args.params_note = note
-    return P
-
-
-def record_params(out_dir, params, note="") -> str:
-    """Write ``params`` to ``out_dir``/params.json (the --params format: the run repeats with
-    ``--params out_dir/params.json``); returns the file name."""
-    from .params import save_params
-    save_params(os.path.join(out_dir, "params.json"), params, note)
-    return "params.json"
 
 
 class Stage:

@@ -12,8 +12,6 @@ import numpy as np
 from ..settle import SettleRule
 
 SWITCHES = ("below", "past")
-                      # floor (one check after the switch: ``hold``)
-
 HOLDS = ("dead_load", "servo")
 
 

@@ -22,6 +22,7 @@ from ..walls import strain_rate, tied
 from .options import BurstOptions, confirm_peak
 
 ONSET = 10.0          # the onset of a burst: the backbone's kinetic energy this many times its
+                      # floor (one check after the switch: ``hold``)
 UNLOADED = 0.05        # a path whose mean wall stress falls below this of its start has unloaded
 
 # a path's records, then its energy ledger from the path's start (first order: the second-order

@@ -175,7 +175,7 @@ def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, 
     out = tmp_path / "burst"
     args = ["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
             "--threads", "1", "--max-steps", "200000", "--max-holds", "5"]
-    import dem.burst as b
+    import dem.burst.stairs as b
     real = b.hold
     calls = {"n": 0}
 

@@ -1,0 +1,263 @@
+"""The calibration's command (``dem.calibrate``, ``python -m dem calibrate``):
+``run_calibration`` checks its options, drives the search over batches of DEM runs spread over
+processes or a dask cluster, takes the runs of the checkpoint on a resume, and writes the files,
+the figures and the summary."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import sys
+import time
+
+import numpy as np
+
+from common.io import atomic_write_bytes
+
+from ..params import DemParams, record_params, save_params
+from .cli import parse_seeds, resolve_field
+from .evaluation import (_combine, _evaluate_task, _header, _log, _past_peak, params_key,
+                         read_checkpoint)
+from .figures import _figure, _score_figure, _search_figure
+from .report import CSV_FIXED, _report, _spread, _verdict, _write_csv, _write_runs_csv
+from .search import (FigureModel, dense_points, identifiability, make_space, space_dim_min,
+                     surrogate_search)
+from .targets import (PEAK_FRACTION, SECANT_STRAIN, TARGETS, TOLERANCES, _fmt_figs, _fmt_values,
+                      compare, curve_figures, hmodel_curve)
+
+
+def _say(verbose, msg):
+    if verbose:
+        print(msg, file=sys.stderr, flush=True)
+
+
+def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel",
+                    seeds=(1, 2), check_seeds=(3,), initial=16, batch=1, max_evals=32,
+                    rate=0.01, confining=200e3, eps_max=0.035, post_peak_strain=0.01,
+                    smooth=0.001, workers=None, scheduler=None, resume=False, verbose=True,
+                    task=None, stage=None, params_note=None):
+    """Fit the fields ``vary`` of ``base`` (the start set) to the target's drained biaxial test
+    (module docstring), every set on each of ``seeds``, the best one then on ``check_seeds``.
+    Writes out_dir/evaluations.jsonl (checkpoint), calibration.csv (a row per set),
+    calibration_runs.csv (a row per run), params.json (a parameter file: the start set
+    ``base``; ``params_note`` says where it came from), calibrated.json (the best set, with the
+    first seed), curves.csv, calibration.png, calibration_search.png, calibration_score.png,
+    report.md and summary.json; returns the summary.  ``max_evals`` counts parameter sets (each
+    is len(seeds) runs).  ``task``: the run function (default: the DEM run
+    ``_evaluate_task``; tests pass a cheap one).  ``stage``: an ``common.options.Stage`` told
+    where the run is and what it has written (for the line of an interrupted command)."""
+    t0 = time.time()
+    if target not in TARGETS:
+        raise ValueError(f"--target {target!r}; allowed: {', '.join(TARGETS)}")
+    vary = tuple(resolve_field(v) for v in vary)
+    seeds = parse_seeds(",".join(map(str, seeds)) if not isinstance(seeds, str) else seeds)
+    check_seeds = (parse_seeds(",".join(map(str, check_seeds))) if check_seeds else ())
+    d_min = len(vary) + 2
+    for name, val, ok, rng in (
+            ("--initial", initial, isinstance(initial, int) and d_min <= initial <= 4096,
+             f"an integer in [{d_min}, 4096] (number of varied parameters + 2 at least)"),
+            ("--batch", batch, isinstance(batch, int) and 1 <= batch <= 64, "an integer in [1, 64]"),
+            ("--max-evals", max_evals, isinstance(max_evals, int) and max_evals >= 1,
+             "an integer >= 1"),
+            ("--check-seeds", check_seeds, not set(check_seeds) & set(seeds),
+             "seeds not in --seeds (a check on a seed the fit did not see)"),
+            ("--rate", rate, rate > 0, "value > 0 [1/s]"),
+            ("--sigma2", confining, confining > 0, "value > 0 [Pa]"),
+            ("--eps1-max", eps_max, 2 * SECANT_STRAIN <= eps_max < 0.5,
+             f"{2 * SECANT_STRAIN:g} <= value < 0.5"),
+            ("--post-peak-strain", post_peak_strain, 0 < post_peak_strain < eps_max,
+             "0 < value < --eps1-max"),
+            ("--smooth", smooth, 0 <= smooth < 0.05, "0 <= value < 0.05")):
+        if not ok or (isinstance(val, float) and not math.isfinite(val)):
+            raise ValueError(f"{name} {val!r}: allowed {rng}")
+    space = make_space(vary, base, bounds)
+    header = _header(target, space, base, seeds, initial, batch, max_evals, rate, confining,
+                     eps_max, post_peak_strain, smooth)
+    ck = os.path.join(out_dir, "evaluations.jsonl")
+    work = os.path.join(out_dir, "work")
+    done = read_checkpoint(ck, header) if resume else {}
+    th = time.time()
+    hcurve = hmodel_curve(confining, eps_max)
+    # the H-model's curve is smooth (1e-5 strain steps): its figures are taken raw; the moving
+    # average is for the DEM's noise only
+    hfig = curve_figures(hcurve["eps1"], hcurve["q"], 0.0)
+    if hfig["eps1_peak"] >= 0.98 * hcurve["eps1"][-1]:
+        raise RuntimeError(f"the {target}'s curve has no peak before eps1 = "
+                           f"{hcurve['eps1'][-1]:g} at --sigma2 {confining:g}")
+    _say(verbose, f"[calibrate] target {target}: peak q = {hfig['peak_q'] / 1e3:.1f} kPa (at "
+                  f"eps1 = {100 * hfig['eps1_peak']:.2f} %), {PEAK_FRACTION:.0%} of it first at "
+                  f"eps1 = {100 * hfig['eps1_95']:.3f} %, secant at {100 * SECANT_STRAIN:g} % = "
+                  f"{hfig['secant'] / 1e6:.1f} MPa ({time.time() - th:.1f} s); every set on "
+                  f"seeds {','.join(map(str, seeds))}")
+    # -- from here on, files are written
+    from .. import io
+    os.makedirs(out_dir, exist_ok=True)
+    record_params(out_dir, base, "python -m dem calibrate: the start set (the best set is "
+                  "calibrated.json)" + (f"; {params_note}" if params_note else ""))
+    if not resume and os.path.exists(ck):
+        os.replace(ck, os.path.join(out_dir, "evaluations.previous.jsonl"))
+        _say(verbose, f"[calibrate] {out_dir} held an earlier calibration: moved to "
+                      "evaluations.previous.jsonl (--resume continues one)")
+    atomic_write_bytes(ck, ("\n".join([json.dumps({"header": header})]
+                                         + [json.dumps(r) for r in done.values()]) + "\n").encode())
+    if done:
+        _say(verbose, f"[calibrate] --resume: {len(done)} finished runs in {ck} (not run again)")
+    records = []            # in search order
+    counts = {"run": 0, "taken": 0}
+    sink = open(ck, "a")
+    task = task or _evaluate_task
+    where = stage
+
+    def run_sets(points, stage, set_seeds):
+        """Runs of every point on every seed of set_seeds: {(i, seed): result}."""
+        got = {}
+        tasks = []
+        for i, v in enumerate(points):
+            for s in set_seeds:
+                d = space.params(base, v).replace(seed=s).to_dict()
+                key = params_key(d)
+                res = done.get(key)
+                if res is None and resume:  # finished in work/ but not logged before the interruption
+                    try:
+                        with open(os.path.join(work, key, "result.json")) as f:
+                            res = json.load(f)
+                        _log(sink, res)
+                        done[key] = res
+                        shutil.rmtree(os.path.join(work, key), ignore_errors=True)
+                    except (OSError, ValueError):
+                        res = None
+                if res is not None:
+                    counts["taken"] += 1
+                    got[(i, s)] = res
+                    continue
+                wd = None if scheduler else os.path.join(work, key)
+                tasks.append(((i, s), {"key": key, "params": d, "rate": rate,
+                                       "confining": confining, "eps_max": eps_max,
+                                       "post_peak_strain": post_peak_strain, "work_dir": wd,
+                                       "resume": bool(resume)}))
+
+        def collect(tag, res):
+            _log(sink, res)
+            done[res["key"]] = res
+            got[tag] = res
+            counts["run"] += 1
+            wd = os.path.join(work, res["key"])
+            if os.path.isdir(wd):
+                shutil.rmtree(wd, ignore_errors=True)
+            if verbose:
+                i, s = tag
+                r = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth)
+                r.update(compare(r, hfig))
+                _say(True, f"[calibrate] {stage} set {len(records) + i}, seed {s} "
+                           f"({counts['run']} runs so far, at most {max_evals} sets): "
+                           f"{_fmt_values(space.names, points[i])}: {_fmt_figs(r)}; run "
+                           f"{res['wall_time']:.0f} s, elapsed {time.time() - t0:.0f} s")
+
+        if where is not None:
+            where.at(f"dem calibrate, {stage} batch after {len(records)} sets (run it again "
+                     "with --resume to continue: finished runs are not rerun)")
+        if tasks and verbose:
+            _say(True, f"[calibrate] {stage}: {len(tasks)} runs"
+                       + (f", {len(got)} taken from the checkpoint" if got else ""))
+        from ..probes import _map
+        _map(tasks, collect, workers, scheduler, fn=task)
+        return got
+
+    def evaluate(points, stage):
+        got = run_sets(points, stage, seeds)
+        out = []
+        for i, v in enumerate(points):
+            rec = _combine([got[(i, s)] for s in seeds], seeds, smooth, post_peak_strain, hfig)
+            rec.update(index=len(records), stage=stage, values=list(v))
+            records.append(rec)
+            out.append(rec)
+            _say(verbose, f"[calibrate] set {rec['index']} ({stage}), mean of seeds "
+                          f"{','.join(map(str, seeds))}: {_fmt_figs(rec)}; score "
+                          f"{rec['score']:.3g}{'; MEETS ALL TARGETS' if rec['met'] else ''}")
+        _write_csv(out_dir, space, records, hfig)
+        if where is not None and not where.written:
+            where.wrote("evaluations.jsonl (every finished run)", "calibration.csv")
+        return out
+
+    try:
+        start = tuple(getattr(base, f) for f in space.names)
+        best, seen, trace, why, info = surrogate_search(
+            space, evaluate, hfig, start=start, initial=initial, max_evals=max_evals, batch=batch)
+        check = []
+        if check_seeds:
+            got = run_sets([tuple(best["values"])], "check", check_seeds)
+            for s in check_seeds:
+                res = got[(0, s)]
+                fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth)
+                check.append({"seed": s, **fig, **compare(fig, hfig),
+                              "past_peak": _past_peak(res["curve"], post_peak_strain),
+                              "porosity": res.get("porosity"), "wall_time": res["wall_time"],
+                              "curve": res["curve"]})
+                _say(verbose, f"[calibrate] check: the best set on seed {s} (not fitted on): "
+                              f"{_fmt_figs(check[-1])}"
+                              f"{'; meets all targets' if check[-1]['met'] else ''}")
+    finally:
+        sink.close()
+    start_rec = records[0]
+    _write_csv(out_dir, space, records, hfig)
+    _write_runs_csv(out_dir, space, records, check, best)
+    best_params = DemParams.from_dict(best["params"])
+    save_params(os.path.join(out_dir, "calibrated.json"), best_params,
+                f"python -m dem calibrate: the best set of {len(records)} ({why}), fitted on "
+                f"seeds {','.join(map(str, seeds))}")
+    paper = DemParams(n=base.n, seed=base.seed)
+    start_label = "DEM, paper set" if base == paper else "DEM, start set"
+    curves = ([("hmodel", "", hcurve)]
+              + [("dem_start", s, c) for s, c in zip(seeds, start_rec["curves"])]
+              + [("dem_calibrated", s, c) for s, c in zip(seeds, best["curves"])]
+              + [("dem_calibrated_check", c["seed"], c["curve"]) for c in check])
+    io.write_csv(os.path.join(out_dir, "curves.csv"), ["curve", "seed", "eps1", "q", "eps_v"],
+                 [[name, s, e, q, v] for name, s, c in curves
+                  for e, q, v in zip(c["eps1"], c["q"], c["eps_v"])])
+    ident = None
+    model = None
+    inside = [(space.u_of(tuple(r["values"])), r) for r in records]
+    inside = [(u, r) for u, r in inside if u is not None]
+    if len(inside) >= space_dim_min(space):
+        model = FigureModel([u for u, _ in inside],
+                            [[math.log(r[f] / hfig[f]) for f in TOLERANCES] for _, r in inside])
+        dense = dense_points(len(space.names), 1)
+        ub = space.u_of(tuple(best["values"]))
+        if ub is not None:
+            ident = identifiability(model, space, ub, dense)
+    _figure(out_dir, hcurve, hfig, start_rec, best, check, start_label, space)
+    _search_figure(out_dir, space, records, best)
+    if model is not None:
+        _score_figure(out_dir, space, records, best, model)
+    verdict = _verdict(space, records, best, hfig, why, info, check)
+    summary = {"target": target, "target_figures": hfig, "tolerances": TOLERANCES,
+               "peak_fraction": PEAK_FRACTION, "options": header, "stopped": why,
+               "evaluations": len(records), "runs": len(records) * len(seeds) + len(check),
+               "run_now": counts["run"], "taken_from_checkpoint": counts["taken"],
+               "trace": trace, "met": best["met"], "verdict": verdict,
+               "best": {k: best[k] for k in ["index", "stage", "values", "score", "met",
+                                            "past_peak", "porosity", "steps", "wall_time"]
+                        + list(CSV_FIXED[:12]) + ["spread_" + k for k in TOLERANCES]},
+               "best_seeds": [{k: v for k, v in p.items() if k != "key"} for p in best["seeds"]],
+               "best_params": {f: v for f, v in zip(space.names, best["values"])},
+               "check": [{k: v for k, v in c.items() if k != "curve"} for c in check],
+               "seeds_spread": _spread(records),
+               "model": info, "identifiability": ident,
+               "start": {k: start_rec[k] for k in ["values", "score", "met", "past_peak"]
+                         + list(CSV_FIXED[:9])},
+               "start_label": start_label,
+               "mean_wall_time_per_run": (float(np.mean([p["wall_time"] for r in records
+                                                         for p in r["seeds"]]))
+                                          if records else None),
+               "wall_time": time.time() - t0,
+               "files": ["params.json", "calibrated.json", "calibration.csv",
+                         "calibration_runs.csv", "curves.csv", "calibration.png",
+                         "calibration_search.png", "calibration_score.png", "report.md",
+                         "evaluations.jsonl", "summary.json"]}
+    atomic_write_bytes(os.path.join(out_dir, "summary.json"),
+                          json.dumps(summary, indent=1, default=float).encode())
+    _report(out_dir, summary, space, records)
+    if os.path.isdir(work) and not os.listdir(work):
+        os.rmdir(work)
+    return summary

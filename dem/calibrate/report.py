@@ -1,0 +1,209 @@
+"""The calibration's report (``dem.calibrate``): calibration.csv (a row per set),
+calibration_runs.csv (a row per run), the verdict (``_verdict``) and report.md (``_report``)."""
+from __future__ import annotations
+
+import itertools
+import os
+
+import numpy as np
+
+from common.io import atomic_write_bytes
+
+from .search import MARGIN_SIGMAS
+from .targets import FIGURE_TEXT, TOLERANCES, _fmt_figs, _fmt_values
+
+CSV_FIXED = ["peak_q", "eps1_95", "secant", "err_peak_q", "err_eps1_95", "err_secant",
+             "met_peak_q", "met_eps1_95", "met_secant", "met", "score", "eps1_peak",
+             "past_peak", "peak_q_raw", "spread_peak_q", "spread_eps1_95", "spread_secant",
+             "porosity", "steps", "wall_time"]
+RUN_FIXED = ["peak_q", "eps1_95", "secant", "eps1_peak", "past_peak", "peak_q_raw", "porosity",
+             "steps", "wall_time"]
+
+
+def _spread(records):
+    """The seeds' spread of each figure over all sets: mean and largest (max - min) / mean."""
+    out = {}
+    for k in TOLERANCES:
+        v = [r["spread_" + k] for r in records]
+        out[k] = {"mean": float(np.mean(v)), "max": float(np.max(v)), "tolerance": TOLERANCES[k]}
+    return out
+
+
+def _cell(v):
+    return int(v) if isinstance(v, bool) else ("" if v is None else v)
+
+
+def _write_csv(out_dir, space, records, hfig):
+    from .. import io
+    cols = ["kind", "index", "stage"] + list(space.names) + CSV_FIXED
+    target = {**hfig, "score": 0.0, "met": True, "past_peak": True,
+              **{f"{p}_{k}": v for k in TOLERANCES for p, v in (("err", 0.0), ("met", True),
+                                                                ("spread", 0.0))}}
+    rows = [["hmodel", "", "target"] + [""] * len(space.names)
+            + [_cell(target.get(c)) for c in CSV_FIXED]]
+    for r in sorted(records, key=lambda r: r["index"]):
+        rows.append(["dem", r["index"], r["stage"]] + list(r["values"])
+                    + [_cell(r[c]) for c in CSV_FIXED])
+    io.write_csv(os.path.join(out_dir, "calibration.csv"), cols, rows)
+
+
+def _write_runs_csv(out_dir, space, records, check, best):
+    """A row per run: the set's index and stage, the seed, the figures of that run alone."""
+    from .. import io
+    cols = ["index", "stage", "seed"] + list(space.names) + RUN_FIXED
+    rows = [[r["index"], r["stage"], p["seed"]] + list(r["values"])
+            + [_cell(p.get(c)) for c in RUN_FIXED] for r in records for p in r["seeds"]]
+    rows += [[best["index"], "check", c["seed"]] + list(best["values"])
+             + [_cell(c.get(k, "")) for k in RUN_FIXED] for c in check]
+    io.write_csv(os.path.join(out_dir, "calibration_runs.csv"), cols, rows)
+
+
+def _verdict(space, records, best, hfig, why, info, check):
+    """Which targets the best set meets, why the search stopped, what the model says of the
+    box (reachable or not, the targets no set meets, the pairs no set meets together), for each
+    target the best set misses the closest any set came, and the check on the other seeds."""
+    lines = []
+    for k, tol in TOLERANCES.items():
+        e = best["err_" + k]
+        line = {"figure": FIGURE_TEXT[k], "target": hfig[k], "best_value": best[k], "error": e,
+                "tolerance": tol, "met": best["met_" + k]}
+        if not best["met_" + k]:
+            c = min(records, key=lambda r: (abs(r["err_" + k]), r["index"]))
+            line["closest"] = {"index": c["index"], "error": c["err_" + k], "met": c["met_" + k],
+                               "params": dict(zip(space.names, c["values"]))}
+        lines.append(line)
+    pairs = {f"{a}+{b}": any(r["met_" + a] and r["met_" + b] for r in records)
+             for a, b in itertools.combinations(TOLERANCES, 2)}
+    text = []
+    if best["met"]:
+        text.append(f"all targets met with {_fmt_values(space.names, best['values'])} "
+                    f"(mean of the seeds; stopped: {why})")
+    else:
+        miss = [l["figure"] for l in lines if not l["met"]]
+        text.append(f"targets NOT all met: {', '.join(miss)} missed by the best set "
+                    f"({_fmt_values(space.names, best['values'])}); stopped: {why}")
+    if info is not None and not best["met"]:
+        if not info["reachable"]:
+            un = ", ".join(FIGURE_TEXT[k] for k in info["unreachable_targets"]) or "none"
+            cf = "; ".join(" and ".join(FIGURE_TEXT[k] for k in p.split("+"))
+                           for p in info["conflicts"]) or "none"
+            text.append(f"the model of the figures (leave-one-out errors "
+                        f"{_fmt_loo(info['loo'])}) shows that no set within the bounds meets "
+                        f"every target, even with each widened by the model's error bar "
+                        f"({MARGIN_SIGMAS:g} of those errors, growing with the distance to the "
+                        f"sets evaluated): the least miss is {info['least_miss']:.2f} "
+                        f"tolerance half-widths beyond it; targets no set meets alone: {un}; "
+                        f"pairs no set meets together: {cf}; best predicted score "
+                        f"{info['predicted_score']:.3g}")
+        elif info["predicted_met"]:
+            text.append(f"the model still predicts sets that meet every target (least "
+                        f"predicted score {info['predicted_score']:.3g}): a larger --max-evals "
+                        "continues the same search")
+        else:
+            text.append(f"the model predicts no set that meets every target (least predicted "
+                        f"score {info['predicted_score']:.3g}) but cannot rule one out within "
+                        "its error bar: a larger --max-evals continues the same search")
+    for l in lines:
+        s = (f"{l['figure']}: {l['best_value']:.4g} vs {l['target']:.4g} ({l['error']:+.1%}, "
+             f"tolerance {l['tolerance']:.0%}) {'met' if l['met'] else 'NOT met'}")
+        if "closest" in l:
+            c = l["closest"]
+            s += (f"; closest of all sets {c['error']:+.1%} (set {c['index']}, "
+                  f"{_fmt_values(c['params'], c['params'].values())})")
+        text.append(s)
+    for c in check:
+        text.append(f"check on seed {c['seed']} (not fitted on): {_fmt_figs(c)}: "
+                    f"{'meets all targets' if c['met'] else 'NOT all targets met'}")
+    return {"lines": lines, "pairs_met_together": pairs, "text": text}
+
+
+def _fmt_loo(loo):
+    return ", ".join(f"{k} {v:.1%}" for k, v in loo.items())
+
+
+def _report(out_dir, s, space, records):
+    """report.md: the targets, the best set and its seeds, the check, the score against each
+    parameter, the seeds' spread, the model and the identifiability."""
+    from .. import io
+    hf, b = s["target_figures"], s["best"]
+    L = ["# Calibration of the DEM against the H-model's drained biaxial test", "",
+         f"`python -m dem calibrate`: n = {s['options']['n']}, seeds "
+         f"{', '.join(map(str, s['options']['seeds']))}, varied "
+         f"{', '.join(space.names)} over "
+         + ", ".join(f"{n} [{lo:.4g}, {hi:.4g}]{' (log)' if lg else ''}"
+                     for n, lo, hi, lg in zip(space.names, space.lo, space.hi, space.log))
+         + f"; {s['evaluations']} sets, {s['runs']} runs, {s['wall_time'] / 60:.1f} min; "
+           f"stopped: **{s['stopped']}**.", "",
+         "## Targets (H-model, Table I) and the best set (mean of the seeds)", "",
+         "| figure | H-model | tolerance | best set | error |", "|---|---|---|---|---|"]
+    units = {"peak_q": (1e-3, "kPa"), "eps1_95": (100, "%"), "secant": (1e-6, "MPa")}
+    for k, tol in TOLERANCES.items():
+        f, u = units[k]
+        L.append(f"| {FIGURE_TEXT[k]} [{u}] | {hf[k] * f:.4g} | {tol:.0%} | {b[k] * f:.4g} | "
+                 f"{b['err_' + k]:+.1%} {'met' if b['met_' + k] else 'NOT met'} |")
+    L += ["", "Best set: " + _fmt_values(space.names, b["values"]) + f" (set {b['index']}, "
+          f"{b['stage']}); eps1 at the peak itself {100 * b['eps1_peak']:.2f} % (H-model "
+          f"{100 * hf['eps1_peak']:.2f} %; not a target: a plateau makes it arbitrary).", "",
+          "| seed | peak q [kPa] | eps1 at 95 % [%] | secant [MPa] | eps1 at the peak [%] | "
+          "porosity | fitted on |", "|---|---|---|---|---|---|---|"]
+    for p in s["best_seeds"]:
+        L.append(f"| {p['seed']} | {p['peak_q'] / 1e3:.1f} | {100 * p['eps1_95']:.3f} | "
+                 f"{p['secant'] / 1e6:.1f} | {100 * p['eps1_peak']:.2f} | "
+                 f"{p['porosity'] if p['porosity'] is None else round(p['porosity'], 4)} | yes |")
+    for c in s["check"]:
+        L.append(f"| {c['seed']} | {c['peak_q'] / 1e3:.1f} ({c['err_peak_q']:+.1%}) | "
+                 f"{100 * c['eps1_95']:.3f} ({c['err_eps1_95']:+.1%}) | {c['secant'] / 1e6:.1f} "
+                 f"({c['err_secant']:+.1%}) | {100 * c['eps1_peak']:.2f} | "
+                 f"{c['porosity'] if c['porosity'] is None else round(c['porosity'], 4)} | "
+                 f"no (check: {'met' if c['met'] else 'NOT met'}) |")
+    L += ["", "![curves](calibration.png)", "", "## The verdict", ""]
+    L += [f"- {t}" for t in s["verdict"]["text"]]
+    L += ["", "## The score against each parameter", "",
+          "Dots: the sets evaluated (mean of the seeds; filled: all targets met); line: the "
+          "model's least predicted score over the other parameters.", "",
+          "![score](calibration_score.png)", "", "![search](calibration_search.png)", "",
+          "## The seeds' spread", "",
+          "(max - min) / mean of each figure over the seeds of a set, over all sets:", "",
+          "| figure | mean | largest | tolerance |", "|---|---|---|---|"]
+    for k, v in s["seeds_spread"].items():
+        L.append(f"| {FIGURE_TEXT[k]} | {v['mean']:.1%} | {v['max']:.1%} | {v['tolerance']:.0%} |")
+    m = s["model"]
+    if m is not None:
+        L += ["", "## The model of the figures", "",
+              f"Leave-one-out error of log(figure): {_fmt_loo(m['loo'])}; smoothing "
+              + ", ".join(f"{k} {v:g}" for k, v in m["smoothing"].items())
+              + f". Least predicted score {m['predicted_score']:.3g} at "
+              + _fmt_values(space.names, space.values(m["u_best"]))
+              + f"; a set predicted to meet every target: "
+                f"{'yes' if m['predicted_met'] else 'no'}; one not ruled out within the error "
+                f"bar: {'yes' if m['reachable'] else 'no'}; largest slopes of log(figure) "
+                "between neighbouring sets (per unit of u): "
+              + ", ".join(f"{k} {v:.3g}" for k, v in m["slope"].items())
+              + "; targets no set meets: "
+              + (", ".join(m["unreachable_targets"]) or "none") + "; pairs no set meets "
+                "together: " + (", ".join(m["conflicts"]) or "none") + "."]
+    idt = s["identifiability"]
+    if idt is not None:
+        L += ["", "## Identifiability at the best set", "",
+              "Change of each figure, in tolerances, for a change of 10 % of each parameter's "
+              "range (the model's derivatives):", "",
+              "| figure | " + " | ".join(space.names) + " |",
+              "|---" * (len(space.names) + 1) + "|"]
+        for k, row in idt["sensitivity"].items():
+            L.append(f"| {FIGURE_TEXT[k]} | " + " | ".join(f"{0.1 * v:+.2f}" for v in row.values())
+                     + " |")
+        sv = idt["singular_values"]
+        L += ["", "Singular values of that matrix (per unit of u): "
+              + ", ".join(f"{v:.3g}" for v in sv)
+              + (f"; condition {sv[0] / sv[-1]:.3g}." if sv[-1] > 0 else ".")]
+        if idt["met_region"]:
+            L += ["", f"The region where the model predicts every target met "
+                      f"({idt['met_region_share']:.2%} of the box) spans:", ""]
+            for n, (lo, hi) in idt["met_region"].items():
+                j = space.names.index(n)
+                share = abs(space.u_of_axis(j, hi) - space.u_of_axis(j, lo))
+                L.append(f"- {n}: {lo:.4g} to {hi:.4g} ({share:.0%} of its range: "
+                         f"{'fixed by the targets' if share <= 0.25 else 'not fixed' if share >= 0.6 else 'partly fixed'})")
+        else:
+            L += ["", "The model predicts no region where every target is met."]
+    atomic_write_bytes(os.path.join(out_dir, "report.md"), ("\n".join(L) + "\n").encode())

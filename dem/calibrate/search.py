@@ -1,0 +1,411 @@
+"""The calibration's search (``dem.calibrate``), pure numerics: no DEM run. The search space
+(``Space``, ``make_space``: u in [0, 1]^d <-> the varied fields' values), the model of the three
+figures (``FigureModel``, a thin-plate-spline RBF per figure), what it says of the box
+(``analyse``, ``identifiability``) and the deterministic search (``surrogate_search``), which
+calls an ``evaluate`` function once per batch."""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+
+from ..params import DemParams
+from .targets import TOLERANCES, rank
+
+# default search range (lo, hi, logarithmic) of the usual fields
+# (friction from 10 deg: the one set known to meet the targets before issue 27 had 15 deg with
+# rolling resistance 0.2, which raises the strength as friction would)
+DEFAULT_BOUNDS = {"kn_over_d": (2e9, 32e9, True), "phi_g": (10.0, 50.0, False),
+                  "kt_over_kn": (0.2, 1.0, False), "rolling_friction": (0.0, 0.3, False),
+                  "rolling_stiffness": (0.25, 4.0, True)}
+LOG_FIELDS = ("kn_over_d", "rolling_stiffness", "r_min", "r_max", "density")
+
+
+def _round(v):
+    return float(f"{v:.4g}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Space:
+    """The varied fields, their ranges [lo, hi] and scales; u in [0, 1]^d <-> values."""
+    names: tuple
+    lo: tuple
+    hi: tuple
+    log: tuple
+
+    def values(self, u):
+        out = []
+        for j, x in enumerate(u):
+            a, b = self.lo[j], self.hi[j]
+            x = min(max(float(x), 0.0), 1.0)
+            v = a * (b / a) ** x if self.log[j] else a + (b - a) * x
+            out.append(min(max(_round(v), a), b))
+        return tuple(out)
+
+    def values_of_axis(self, j, x):
+        """The value of parameter j at u_j = x (not rounded)."""
+        a, b = self.lo[j], self.hi[j]
+        return float(a * (b / a) ** x if self.log[j] else a + (b - a) * x)
+
+    def u_of_axis(self, j, v):
+        """u_j of the value v of parameter j (not clipped)."""
+        a, b = self.lo[j], self.hi[j]
+        return float(math.log(v / a) / math.log(b / a) if self.log[j] else (v - a) / (b - a))
+
+    def u_of(self, values):
+        """u of values inside the ranges, or None."""
+        u = []
+        for j, v in enumerate(values):
+            a, b = self.lo[j], self.hi[j]
+            if not a <= v <= b:
+                return None
+            u.append(math.log(v / a) / math.log(b / a) if self.log[j] else (v - a) / (b - a))
+        return tuple(u)
+
+    def params(self, base: DemParams, values) -> DemParams:
+        return base.replace(**dict(zip(self.names, values)))
+
+
+def make_space(vary, base: DemParams, bounds=None) -> Space:
+    """The search space of the fields ``vary`` (ValueError naming --bounds when a range is
+    missing, or gives parameters DemParams refuses)."""
+    bounds = dict(bounds or {})
+    extra = sorted(set(bounds) - set(vary))
+    if extra:
+        raise ValueError(f"--bounds {', '.join(extra)}: not in --vary {','.join(vary)}; allowed "
+                         "ranges of the varied parameters only")
+    lo, hi, log = [], [], []
+    for f in vary:
+        if f in bounds:
+            a, b = bounds[f]
+            lg = f in LOG_FIELDS and a > 0
+        elif f in DEFAULT_BOUNDS:
+            a, b, lg = DEFAULT_BOUNDS[f]
+        else:
+            v = getattr(base, f)
+            if not v > 0:
+                raise ValueError(f"--bounds: {f} has no default range (its start value is {v}); "
+                                 f"allowed: give one, e.g. --bounds {f}=LO:HI")
+            a, b, lg = 0.5 * v, 2.0 * v, True
+        for x in (a, b):
+            try:
+                base.replace(**{f: x})
+            except ValueError as e:
+                raise ValueError(f"--bounds {f}={a:g}:{b:g}: {e}") from None
+        lo.append(float(a)); hi.append(float(b)); log.append(bool(lg))
+    return Space(tuple(vary), tuple(lo), tuple(hi), tuple(log))
+
+
+# -- the search ---------------------------------------------------------------------------------
+# A surrogate of the three figures (not of the score): each figure is a smooth function of the
+# parameters, the score a sum of squares of them; a model of each figure also says which target
+# can be met where, so the search can show that two targets conflict.
+SMOOTHINGS = (0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0)   # candidates of the RBF smoothing (LOO)
+MARGIN_SIGMAS = 2.0      # the model's error bar: 2 LOO errors at an evaluated set, growing
+                         # away from it with the figure's slope between neighbouring sets
+MIN_DISTANCE = 0.03      # a new candidate keeps this distance (in u) from every evaluated one
+DENSE_POINTS = 2 ** 13   # the Sobol set on which the model is minimised (then polished)
+
+
+def _band(k):
+    """The target band of figure k in y = log(figure / target): [log(1 - tol), log(1 + tol)]."""
+    t = TOLERANCES[k]
+    return math.log(1.0 - t), math.log(1.0 + t)
+
+
+class FigureModel:
+    """Radial-basis-function model (thin-plate spline with a linear tail, scipy's
+    ``RBFInterpolator``) of y_k = log(figure_k / target_k), k in TOLERANCES, over u in [0, 1]^d.
+
+    The smoothing of each figure is chosen among SMOOTHINGS by leave-one-out (LOO) error: 0
+    (interpolation) for an exact model, larger where the DEM's sample-to-sample scatter is;
+    ``loo[k]`` (the RMS LOO error of y_k, i.e. a relative error) is the model's own error bar.
+    U: (n, d) array, Y: (n, 3) array (columns in the order of TOLERANCES)."""
+
+    def __init__(self, U, Y):
+        from scipy.interpolate import RBFInterpolator
+        self.U = np.asarray(U, float)
+        self.Y = np.asarray(Y, float)
+        n, d = self.U.shape
+        if n < d + 2:
+            raise ValueError(f"FigureModel: {n} points in {d} dimensions; needs at least {d + 2}")
+        self.names = tuple(TOLERANCES)
+        loo = np.full((len(SMOOTHINGS), self.Y.shape[1]), np.inf)
+        for i, s in enumerate(SMOOTHINGS):
+            err = np.empty_like(self.Y)
+            for j in range(n):
+                keep = np.arange(n) != j
+                try:
+                    f = RBFInterpolator(self.U[keep], self.Y[keep], smoothing=s,
+                                        kernel="thin_plate_spline", degree=1)
+                    err[j] = f(self.U[j:j + 1])[0] - self.Y[j]
+                except (np.linalg.LinAlgError, ValueError):
+                    err[j] = np.inf
+            loo[i] = np.sqrt(np.mean(err ** 2, axis=0))
+        best = np.argmin(loo, axis=0)              # the first (least smoothing) of equal ones
+        self.smoothing = tuple(SMOOTHINGS[i] for i in best)
+        self.loo = {k: float(loo[best[c], c]) for c, k in enumerate(self.names)}
+        self._f = [RBFInterpolator(self.U, self.Y[:, c], smoothing=self.smoothing[c],
+                                   kernel="thin_plate_spline", degree=1)
+                   for c in range(self.Y.shape[1])]
+        # slope of each figure between neighbouring sets (the largest over the sets of |dy| / |du| to
+        # the nearest one): how fast the error bar grows away from the sets evaluated
+        D = np.linalg.norm(self.U[:, None, :] - self.U[None], axis=2)
+        np.fill_diagonal(D, np.inf)
+        j = np.argmin(D, axis=1)
+        dist = D[np.arange(n), j]
+        self.slope = {k: float(np.max(np.abs(self.Y[:, c] - self.Y[j, c]) / dist))
+                      for c, k in enumerate(self.names)}
+
+    def distance(self, U):
+        """Distance (in u) of each row of U to the nearest set the model was fitted on."""
+        return nearest_distance(U, self.U)
+
+    def __call__(self, U):
+        """Predicted y (m, 3) at u (m, d)."""
+        U = np.atleast_2d(np.asarray(U, float))
+        return np.stack([f(U) for f in self._f], axis=1)
+
+    def score(self, U):
+        """Predicted score sum_k ((exp(y_k) - 1) / tol_k)^2 at u (m, d)."""
+        tol = np.array([TOLERANCES[k] for k in self.names])
+        return np.sum(((np.exp(self(U)) - 1.0) / tol) ** 2, axis=1)
+
+    def miss(self, U, which=None, error_bar=False):
+        """max over the targets ``which`` (default all) of the distance of predicted y_k to its
+        band, in units of the band's half-width: 0 where every one of them is predicted met.
+        ``error_bar``: each band widened by the model's error bar there, MARGIN_SIGMAS * loo[k]
+        + slope[k] * (distance to the nearest set evaluated): 0 where the model cannot rule out
+        that every one of them is met."""
+        Y = self(U)
+        out = np.zeros(len(Y))
+        dist = self.distance(U) if error_bar else None
+        for c, k in enumerate(self.names):
+            if which is not None and k not in which:
+                continue
+            lo, hi = _band(k)
+            w = (MARGIN_SIGMAS * self.loo[k] + self.slope[k] * dist) if error_bar else 0.0
+            d = np.maximum(lo - w - Y[:, c], 0.0) + np.maximum(Y[:, c] - hi - w, 0.0)
+            out = np.maximum(out, d / (0.5 * (hi - lo)))
+        return out
+
+
+def _polish(fun, u0, method):
+    from scipy.optimize import minimize
+    d = len(u0)
+    r = minimize(lambda u: float(fun(np.clip(u, 0.0, 1.0)[None, :])[0]), u0, method=method,
+                 bounds=[(0.0, 1.0)] * d,
+                 options={"maxiter": 200 * d} if method == "Nelder-Mead" else {"maxiter": 200})
+    u = np.clip(r.x, 0.0, 1.0)
+    return u, float(fun(u[None, :])[0])
+
+
+def _minimise(fun, dense, method="L-BFGS-B", starts=3):
+    """Minimum of fun over the box: the best of ``dense`` points, polished from the ``starts``
+    best of them (L-BFGS-B for the smooth score, Nelder-Mead for a max of distances)."""
+    v = fun(dense)
+    order = np.argsort(v, kind="stable")
+    best_u, best_v = dense[order[0]].copy(), float(v[order[0]])
+    for i in order[:starts]:
+        u, f = _polish(fun, dense[i], method)
+        if f < best_v - 1e-15:
+            best_u, best_v = u, f
+    return best_u, best_v
+
+
+def analyse(model: FigureModel, dense):
+    """What the model says of the box: the minimum of the predicted score (and where), whether
+    it predicts a set meeting every target (``predicted_met``), whether it can rule out that
+    any does within its error bar (``reachable`` False: the proof), which targets no set can
+    meet and which pairs no set can meet together (within the error bar)."""
+    u_best, s_best = _minimise(model.score, dense)
+    names = model.names
+    out = {"u_best": u_best.tolist(), "predicted_score": s_best,
+           "predicted_errors": {k: float(np.expm1(y)) for k, y in zip(names, model(u_best)[0])},
+           "loo": dict(model.loo), "smoothing": dict(zip(names, model.smoothing))}
+
+    def least(which):
+        u, v = _minimise(lambda U: model.miss(U, which, True), dense, "Nelder-Mead")
+        return u, v
+
+    out["predicted_met"] = bool(_minimise(model.miss, dense, "Nelder-Mead")[1] <= 0.0)
+    u_all, m_all = least(None)
+    out["reachable"] = bool(m_all <= 0.0)
+    out["slope"] = dict(model.slope)
+    out["least_miss"] = m_all                 # in band half-widths, beyond the error bar
+    out["least_miss_at"] = u_all.tolist()
+    out["unreachable_targets"] = [k for k in names if least((k,))[1] > 0.0]
+    out["conflicts"] = [f"{a}+{b}" for a, b in itertools.combinations(names, 2)
+                        if least((a, b))[1] > 0.0]
+    return out
+
+
+def identifiability(model: FigureModel, space, u, dense):
+    """Which parameters the targets fix at u: the sensitivities d y_k / d u_j (central
+    differences of the model, in band half-widths per unit of u), their singular values, and
+    the extent of the region the model predicts to meet every target (no margin) along each
+    parameter (values; None when that region is empty)."""
+    u = np.asarray(u, float)
+    d = len(u)
+    h = 0.02
+    J = np.zeros((len(model.names), d))
+    for j in range(d):
+        a, b = u.copy(), u.copy()
+        a[j], b[j] = max(u[j] - h, 0.0), min(u[j] + h, 1.0)
+        J[:, j] = (model(b[None, :])[0] - model(a[None, :])[0]) / (b[j] - a[j])
+    half = np.array([0.5 * (_band(k)[1] - _band(k)[0]) for k in model.names])
+    G = J / half[:, None]
+    sv = np.linalg.svd(G, compute_uv=False)
+    inside = dense[model.miss(dense) <= 0.0]
+    region = None
+    if len(inside):
+        region = {n: [space.values_of_axis(j, inside[:, j].min()),
+                      space.values_of_axis(j, inside[:, j].max())]
+                  for j, n in enumerate(space.names)}
+    return {"sensitivity": {k: dict(zip(space.names, map(float, G[c])))
+                            for c, k in enumerate(model.names)},
+            "singular_values": [float(s) for s in sv],
+            "met_region": region, "met_region_share": float(len(inside) / len(dense))}
+
+
+def dense_points(d, seed):
+    """DENSE_POINTS scrambled Sobol points in [0, 1]^d (seeded)."""
+    from scipy.stats import qmc
+    return qmc.Sobol(d, scramble=True, seed=seed).random_base2(int(math.log2(DENSE_POINTS)))
+
+
+def initial_design(d, n, seed):
+    """n scrambled Sobol points in [0, 1]^d (seeded; the first n of a 2^m set, so a larger n
+    starts the same way)."""
+    from scipy.stats import qmc
+    m = max(int(math.ceil(math.log2(max(n, 2)))), 1)
+    return qmc.Sobol(d, scramble=True, seed=seed).random_base2(m)[:n]
+
+
+def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max_evals=32, batch=1,
+                     design_seed=0):
+    """Global search of the parameter sets (module docstring): the start set, a space-filling
+    design of ``initial`` Sobol points, then rounds of ``batch`` sets where the model of the
+    three figures (``FigureModel``, refitted on every evaluation inside the box) predicts the
+    lowest score, each at least MIN_DISTANCE from those evaluated.  Stops when an evaluated set
+    meets every target, when the model shows that none within the box can (``analyse``: no
+    point meets them all even with every target widened by the model's error bar there), or at
+    ``max_evals`` sets.  While the model predicts no set meeting every target, the rounds
+    explore instead (``_explore``): where its error bar leaves the most room for one.
+
+    ``target``: the target figures (dict of TOLERANCES' keys).  ``evaluate(list of value
+    tuples, stage) -> list of records`` (dicts with at least met, score, index and the figures
+    of TOLERANCES), called once per batch with the sets not evaluated yet.  Returns (best
+    record, {values: record}, trace, why it stopped, the model's last analysis or None)."""
+    if initial < space_dim_min(space):
+        raise ValueError(f"initial={initial!r}; allowed an integer >= {space_dim_min(space)}")
+    seen = {}
+    trace = []
+    state = {"full": False}
+    dense = dense_points(len(space.names), design_seed + 1)
+
+    def run(points, stage):
+        todo = []
+        for v in points:
+            if v not in seen and v not in todo:
+                todo.append(v)
+        room = max_evals - len(seen)
+        if len(todo) > room:
+            todo, state["full"] = todo[:max(room, 0)], True
+        recs = evaluate(todo, stage) if todo else []
+        seen.update(zip(todo, recs))
+        trace.append({"stage": stage, "points": len(points), "evaluated": len(todo)})
+
+    def best():
+        return min(seen.values(), key=rank)
+
+    if start is not None:
+        run([tuple(start)], "start")
+    if not state["full"]:
+        run([space.values(u) for u in initial_design(len(space.names), initial, design_seed)],
+            "design")
+    k = 0
+    why, info = None, None
+    while True:
+        if best()["met"]:
+            why = "targets met"
+            break
+        pts = [(space.u_of(v), r) for v, r in seen.items()]
+        pts = [(u, r) for u, r in pts if u is not None]
+        model = None
+        if len(pts) >= space_dim_min(space):
+            model = FigureModel([u for u, _ in pts],
+                                [[math.log(r[f] / target[f]) for f in TOLERANCES]
+                                 for _, r in pts])
+            info = analyse(model, dense)
+            info["round"] = k
+            trace[-1]["model"] = {key: info[key] for key in (
+                "predicted_score", "predicted_met", "reachable", "least_miss", "conflicts", "loo")}
+            if not info["reachable"]:
+                why = "no set within the bounds meets the targets"
+                break
+        if state["full"] or len(seen) >= max_evals:
+            why = "max_evals reached"
+            break
+        if model is None:
+            why = "too few evaluations inside the bounds for a model"
+            break
+        k += 1
+        U_seen = np.array([space.u_of(v) or [np.nan] * len(space.names) for v in seen])
+        chosen = []
+        explore = not info["predicted_met"]
+        for _ in range(batch):
+            ref = np.vstack([U_seen] + [np.atleast_2d(c) for c in chosen])
+            # the model predicts no set that meets every target but cannot rule one out: look
+            # where its error bar leaves the most room
+            u = _explore(model, dense, ref) if explore else _candidate(model, dense, ref)
+            if u is None:
+                break
+            chosen.append(u)
+        if not chosen:
+            why = "every point the model suggests is within MIN_DISTANCE of an evaluated one"
+            break
+        run([space.values(u) for u in chosen], f"{'explore' if explore else 'model'}{k}")
+    return best(), seen, trace, why, info
+
+
+def space_dim_min(space):
+    """The fewest evaluations inside the box the model needs (thin-plate spline with a linear
+    tail in d dimensions: d + 2, so that one can be left out)."""
+    return len(space.names) + 2
+
+
+def nearest_distance(P, ref):
+    """Distance (in u) of each row of P to the nearest row of ref (rows of nan, sets outside
+    the box, are ignored)."""
+    P = np.atleast_2d(np.asarray(P, float))
+    return np.nanmin(np.linalg.norm(P[:, None, :] - np.asarray(ref, float)[None], axis=2), axis=1)
+
+
+def _explore(model, dense, ref):
+    """Among the dense points at least MIN_DISTANCE from every row of ref, those of least miss
+    within the model's error bar, and of them the one of least predicted miss (the model's
+    best guess of where the targets may be met)."""
+    far = nearest_distance(dense, ref) >= MIN_DISTANCE
+    if not far.any():
+        return None
+    P = dense[far]
+    bar = model.miss(P, error_bar=True)
+    P = P[bar <= bar.min() + 1e-12]
+    return P[int(np.argmin(model.miss(P)))]
+
+
+def _candidate(model, dense, ref):
+    """The point of least predicted score at least MIN_DISTANCE from every row of ref: the
+    polished minimum when it keeps the distance, else the best dense point that does."""
+    ok = lambda U: nearest_distance(U, ref) >= MIN_DISTANCE
+    u, _ = _minimise(model.score, dense)
+    if ok(u)[0]:
+        return u
+    far = ok(dense)
+    if not far.any():
+        return None
+    s = model.score(dense[far])
+    return dense[far][int(np.argmin(s))]

@@ -1,0 +1,107 @@
+"""The calibration's targets (``dem.calibrate``): the three figures of a drained biaxial curve
+(peak q, eps1 at PEAK_FRACTION of it, the secant modulus; ``curve_figures``), their tolerances and
+relative errors (``compare``, ``rank``), and the H-model's curve they are read from
+(``hmodel_curve``)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+TOLERANCES = {"peak_q": 0.05, "eps1_95": 0.25, "secant": 0.20}
+PEAK_FRACTION = 0.95     # eps1_95: the first strain where q reaches this fraction of its peak
+FIGURE_TEXT = {"peak_q": "peak q", "eps1_95": "eps1 at 95 % of the peak",
+               "secant": "secant modulus q/eps1 at eps1 = 0.25 %"}
+SECANT_STRAIN = 0.0025
+TARGETS = ("hmodel",)
+
+
+# -- the three figures of a curve ----------------------------------------------------------------
+def smoothed(eps1, q, window):
+    """q averaged over eps1 in [e - window/2, e + window/2] at every point (window 0: q)."""
+    e = np.asarray(eps1, float)
+    q = np.asarray(q, float)
+    if window <= 0 or len(q) < 3:
+        return q.copy()
+    c = np.concatenate([[0.0], np.cumsum(q)])
+    half = 0.5 * window * (1 + 1e-6)       # points on the window's edges count on both sides
+    lo = np.searchsorted(e, e - half, side="left")
+    hi = np.searchsorted(e, e + half, side="right")
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+def curve_figures(eps1, q, smooth=0.001, secant_strain=SECANT_STRAIN) -> dict:
+    """peak_q and eps1_peak (the maximum of q smoothed over the strain window ``smooth``),
+    eps1_95 (the first eps1 where the smoothed q reaches PEAK_FRACTION of peak_q, linear
+    between records), peak_q_raw (max q), secant = (q(secant_strain) - q(0)) / (secant_strain
+    - eps1(0)) with q interpolated linearly on the raw curve.  eps1 must increase; ValueError if
+    the curve stops before ``secant_strain``."""
+    e = np.asarray(eps1, float)
+    q = np.asarray(q, float)
+    if len(e) < 2 or not np.all(np.diff(e) > 0):
+        raise ValueError("curve_figures: eps1 must be increasing, at least 2 points")
+    if e[-1] < secant_strain:
+        raise ValueError(f"curve_figures: the curve stops at eps1 = {e[-1]:.4g}, before the "
+                         f"secant strain {secant_strain:g}")
+    qs = smoothed(e, q, smooth)
+    i = int(np.argmax(qs))
+    sec = (float(np.interp(secant_strain, e, q)) - q[0]) / (secant_strain - e[0])
+    level = PEAK_FRACTION * qs[i]
+    j = int(np.argmax(qs >= level))             # first record at the level (j <= i)
+    if j == 0:
+        e95 = e[0]
+    else:
+        e95 = e[j - 1] + (level - qs[j - 1]) / (qs[j] - qs[j - 1]) * (e[j] - e[j - 1])
+    return {"peak_q": float(qs[i]), "eps1_peak": float(e[i]), "eps1_95": float(e95),
+            "secant": float(sec), "peak_q_raw": float(np.max(q))}
+
+
+def compare(fig, target) -> dict:
+    """Relative errors err_X = fig/target - 1, met_X = |err_X| <= TOLERANCES[X], met (all)
+    and score = sum((err_X / tol_X)^2)."""
+    out = {}
+    for k, tol in TOLERANCES.items():
+        err = fig[k] / target[k] - 1.0
+        out["err_" + k] = float(err)
+        out["met_" + k] = bool(abs(err) <= tol)
+    out["met"] = all(out["met_" + k] for k in TOLERANCES)
+    out["score"] = float(sum((out["err_" + k] / t) ** 2 for k, t in TOLERANCES.items()))
+    return out
+
+
+def rank(rec):
+    """Sort key of an evaluation: meets every target first, then the score, then its order."""
+    return (not rec["met"], rec["score"], rec["index"])
+
+
+# -- the H-model's curve ----------------------------------------------------------------------
+HMODEL_EPS_MIN = 0.05      # the H-model's curve runs at least this far (its peak: 2.09 %)
+
+
+def hmodel_curve(confining=200e3, eps_max=0.035, d_eps1=1e-5):
+    """The H-model's drained biaxial test (Table I parameters, p0 = confining) to
+    max(eps_max, HMODEL_EPS_MIN), so that it is past its peak whatever the DEM's eps_max:
+    dict of eps1, q, eps_v, p lists."""
+    eps_max = max(eps_max, HMODEL_EPS_MIN)
+    from hmodel.driver import MixedControlError, drained_biaxial, isotropic_state, run_path
+    from hmodel.params import HParams
+    P = HParams(p0=float(confining))
+    n = int(math.ceil(eps_max / d_eps1))
+    try:
+        r = run_path(isotropic_state(P), P, drained_biaxial(d_eps1), n)
+    except MixedControlError as e:      # softening past what the driver can follow: keep it
+        r = e.partial
+    s1, s2 = r.sigma[:, 0], r.sigma[:, 1]
+    return {"eps1": r.eps[:, 0].tolist(), "q": (s1 - s2).tolist(),
+            "eps_v": (r.eps[:, 0] + r.eps[:, 1]).tolist(), "p": (0.5 * (s1 + s2)).tolist()}
+
+
+def _fmt_values(names, values):
+    return ", ".join(f"{n}={v:.4g}" for n, v in zip(names, values))
+
+
+def _fmt_figs(rec):
+    return (f"peak q = {rec['peak_q'] / 1e3:.1f} kPa ({rec['err_peak_q']:+.1%}), eps1 at "
+            f"{PEAK_FRACTION:.0%} of it = {100 * rec['eps1_95']:.3f} % ({rec['err_eps1_95']:+.1%}"
+            f"{'' if rec.get('past_peak', True) else ', not past the peak'}), secant = "
+            f"{rec['secant'] / 1e6:.1f} MPa ({rec['err_secant']:+.1%})")

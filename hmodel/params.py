@@ -9,7 +9,8 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from common.options import VOCABULARY, OptionError, add, option_of
+from common import options as opt
+from common.options import VOCABULARY, OptionError, option_of
 
 __all__ = ["HParams", "ParamError", "UNITS", "load_params", "save_params", "add_param_options",
            "params_from", "record_params", "param_option_error", "PARAM_OPTIONS"]
@@ -170,10 +171,10 @@ def add_param_options(ap: argparse.ArgumentParser):
     d = HParams()
     g = ap.add_argument_group("model parameters (Table I unless --params FILE; an option given "
                               "overrides the file)")
-    add(g, "--params", metavar="FILE", note="of the H-model: python -m hmodel params --out FILE",
+    opt.add(g, "--params", metavar="FILE", note="of the H-model: python -m hmodel params --out FILE",
         default_text="Table I")
     for option, name in PARAM_OPTIONS:
-        add(g, option, record="HParams", metavar=name.upper(),
+        opt.add(g, option, record="HParams", metavar=name.upper(),
             default_text=f"the file's, else Table I's "
                          f"{'null (2 r_g)' if getattr(d, name) is None else format(getattr(d, name), 'g')}")
 

@@ -822,26 +822,34 @@ class Terminated(BaseException):
     """SIGTERM, raised in the main thread like KeyboardInterrupt for Ctrl-C."""
 
 
-def _in_numba_callback(frame) -> bool:
-    """True if ``frame`` runs inside Numba's unpickling callback. Compiled code calls it from C
-    (to box every returned array, among others), and Numba's tuple boxing goes on past a failed
-    element: an exception raised there comes out as ``SystemError: ... returned a result with an
-    exception set`` instead of itself."""
-    from numba.core.serialize import _numba_unpickle
-    code = _numba_unpickle.__code__
+def _in_callback(frame) -> bool:
+    """True if ``frame`` runs where an exception raised by a signal handler would not reach the
+    run: inside a finaliser (a ``__del__`` method, a ``weakref.finalize`` callback: Python
+    prints "Exception ignored in ..." and goes on, so the run would end as if never
+    interrupted; llvmlite frees its objects in ``__del__`` all through Numba's first
+    compilation), or inside Numba's unpickling callback (compiled code calls it from C to box
+    every returned array, among others, and Numba's tuple boxing goes on past a failed element:
+    an exception raised there comes out as ``SystemError: ... returned a result with an
+    exception set`` instead of itself)."""
+    import weakref
+    codes = {weakref.finalize.__call__.__code__}
+    if "numba.core.serialize" in sys.modules:
+        from numba.core.serialize import _numba_unpickle
+        codes.add(_numba_unpickle.__code__)
     while frame is not None:
-        if frame.f_code is code:
+        if frame.f_code in codes or frame.f_code.co_name == "__del__":
             return True
         frame = frame.f_back
     return False
 
 
 def _interrupt_handler(exc_type):
-    """A signal handler raising ``exc_type`` in the main thread, or, if the signal lands inside a
-    callback of compiled code, sending the signal again 5 ms later (that callback returns in
-    microseconds, so the exception is raised in Python code)."""
+    """A signal handler raising ``exc_type`` in the main thread, or, if the signal lands where
+    the exception would be lost or mangled (``_in_callback``), sending the signal again 5 ms
+    later (such a callback returns in microseconds, so the exception is raised in the run's
+    own code)."""
     def handler(signum, frame):
-        if "numba.core.serialize" in sys.modules and _in_numba_callback(frame):
+        if _in_callback(frame):
             again = threading.Timer(0.005, signal.pthread_kill,
                                     (threading.main_thread().ident, signum))
             again.daemon = True
@@ -854,7 +862,7 @@ def _interrupt_handler(exc_type):
 @contextmanager
 def _sigterm_raises():
     """SIGTERM raises Terminated and SIGINT KeyboardInterrupt (unless SIGINT is ignored), never
-    inside a callback of compiled code (see ``_in_numba_callback``)."""
+    inside a finaliser or a callback of compiled code (see ``_in_callback``)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

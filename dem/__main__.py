@@ -433,13 +433,16 @@ def build_parser() -> opt.Parser:
 
     from .calibrate import DEFAULT_VARY, TARGETS, bounds_type, seeds_type, vary_type
     k = sub.add_parser("calibrate", help="fit DEM parameters to the H-model's drained biaxial "
-                                         "test (peak q, eps1 at 95 %% of it, secant modulus)",
+                                         "test (peak q, eps1 at 95 %% of it, secant modulus, "
+                                         "dilatancy ratio)",
                        description="Fit the --vary fields of the start set (--params / the "
                                    "options, the paper's set by default; --n defaults to 2000 "
                                    "here) so that the DEM's drained biaxial test matches the "
                                    "H-model's: peak q within 5 %, eps1 where q first reaches "
                                    "95 % of its peak within 25 %, secant modulus q/eps1 at "
-                                   "eps1 = 0.25 % within 20 % (means over --seeds); a global "
+                                   "eps1 = 0.25 % within 20 %, dilatancy ratio 1 - d eps_v/"
+                                   "d eps1 over the 1 % after that strain within 5 % (means "
+                                   "over --seeds); a global "
                                    "search that stops when they are met or when its model of "
                                    "the figures shows that no set within the bounds can meet "
                                    "them. See docs/dem.md.")

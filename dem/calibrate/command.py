@@ -20,11 +20,11 @@ from .cli import parse_seeds, resolve_field
 from .evaluation import (_combine, _evaluate_task, _header, _log, _past_peak, params_key,
                          read_checkpoint)
 from .figures import _figure, _score_figure, _search_figure
-from .report import CSV_FIXED, _report, _spread, _verdict, _write_csv, _write_runs_csv
+from .report import FIGURE_COLS, _report, _spread, _verdict, _write_csv, _write_runs_csv
 from .search import (FigureModel, dense_points, identifiability, make_space, space_dim_min,
                      surrogate_search)
-from .targets import (PEAK_FRACTION, SECANT_STRAIN, TARGETS, TOLERANCES, _fmt_figs, _fmt_values,
-                      compare, curve_figures, hmodel_curve)
+from .targets import (DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TARGETS, TOLERANCES,
+                      _fmt_figs, _fmt_values, compare, curve_figures, hmodel_curve)
 
 
 def _say(verbose, msg):
@@ -76,19 +76,22 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                      eps_max, post_peak_strain, smooth)
     ck = os.path.join(out_dir, "evaluations.jsonl")
     work = os.path.join(out_dir, "work")
-    done = read_checkpoint(ck, header) if resume else {}
+    notes = []
+    done = read_checkpoint(ck, header, notes) if resume else {}
     th = time.time()
     hcurve = hmodel_curve(confining, eps_max)
     # the H-model's curve is smooth (1e-5 strain steps): its figures are taken raw; the moving
     # average is for the DEM's noise only
-    hfig = curve_figures(hcurve["eps1"], hcurve["q"], 0.0)
+    hfig = curve_figures(hcurve["eps1"], hcurve["q"], 0.0, eps_v=hcurve["eps_v"])
     if hfig["eps1_peak"] >= 0.98 * hcurve["eps1"][-1]:
         raise RuntimeError(f"the {target}'s curve has no peak before eps1 = "
                            f"{hcurve['eps1'][-1]:g} at --sigma2 {confining:g}")
     _say(verbose, f"[calibrate] target {target}: peak q = {hfig['peak_q'] / 1e3:.1f} kPa (at "
                   f"eps1 = {100 * hfig['eps1_peak']:.2f} %), {PEAK_FRACTION:.0%} of it first at "
                   f"eps1 = {100 * hfig['eps1_95']:.3f} %, secant at {100 * SECANT_STRAIN:g} % = "
-                  f"{hfig['secant'] / 1e6:.1f} MPa ({time.time() - th:.1f} s); every set on "
+                  f"{hfig['secant'] / 1e6:.1f} MPa, dilatancy ratio 1 - d eps_v/d eps1 over "
+                  f"{100 * DILATANCY_STRAIN:g} % after it = {hfig['dilatancy']:.3f} "
+                  f"({time.time() - th:.1f} s); every set on "
                   f"seeds {','.join(map(str, seeds))}")
     # -- from here on, files are written
     from .. import io
@@ -101,6 +104,8 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                       "evaluations.previous.jsonl (--resume continues one)")
     atomic_write_bytes(ck, ("\n".join([json.dumps({"header": header})]
                                          + [json.dumps(r) for r in done.values()]) + "\n").encode())
+    for note in notes:
+        _say(verbose, f"[calibrate] {note}")
     if done:
         _say(verbose, f"[calibrate] --resume: {len(done)} finished runs in {ck} (not run again)")
     records = []            # in search order
@@ -147,7 +152,8 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                 shutil.rmtree(wd, ignore_errors=True)
             if verbose:
                 i, s = tag
-                r = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth)
+                r = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
+                                  eps_v=res["curve"]["eps_v"])
                 r.update(compare(r, hfig))
                 _say(True, f"[calibrate] {stage} set {len(records) + i}, seed {s} "
                            f"({counts['run']} runs so far, at most {max_evals} sets): "
@@ -189,7 +195,8 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
             got = run_sets([tuple(best["values"])], "check", check_seeds)
             for s in check_seeds:
                 res = got[(0, s)]
-                fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth)
+                fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
+                                    eps_v=res["curve"]["eps_v"])
                 check.append({"seed": s, **fig, **compare(fig, hfig),
                               "past_peak": _past_peak(res["curve"], post_peak_strain),
                               "porosity": res.get("porosity"), "wall_time": res["wall_time"],
@@ -238,14 +245,14 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                "trace": trace, "met": best["met"], "verdict": verdict,
                "best": {k: best[k] for k in ["index", "stage", "values", "score", "met",
                                             "past_peak", "porosity", "steps", "wall_time"]
-                        + list(CSV_FIXED[:12]) + ["spread_" + k for k in TOLERANCES]},
+                        + FIGURE_COLS + ["eps1_peak"] + ["spread_" + k for k in TOLERANCES]},
                "best_seeds": [{k: v for k, v in p.items() if k != "key"} for p in best["seeds"]],
                "best_params": {f: v for f, v in zip(space.names, best["values"])},
                "check": [{k: v for k, v in c.items() if k != "curve"} for c in check],
                "seeds_spread": _spread(records),
                "model": info, "identifiability": ident,
                "start": {k: start_rec[k] for k in ["values", "score", "met", "past_peak"]
-                         + list(CSV_FIXED[:9])},
+                         + FIGURE_COLS[:-2]},
                "start_label": start_label,
                "mean_wall_time_per_run": (float(np.mean([p["wall_time"] for r in records
                                                          for p in r["seeds"]]))

@@ -15,7 +15,8 @@ import tempfile
 import numpy as np
 
 from ..params import RENAMED, DemParams, migrate
-from .targets import PEAK_FRACTION, SECANT_STRAIN, TOLERANCES, compare, curve_figures
+from .targets import (DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TOLERANCES, compare,
+                      curve_figures)
 
 # options of the header that may differ on --resume (they do not change the search)
 RESUME_FREE = ("max_evals",)
@@ -81,12 +82,13 @@ def _combine(runs, seeds, smooth, post_peak_strain, hfig):
     over the seeds, spread_X = (max - min) / mean of figure X over them."""
     per = []
     for s, res in zip(seeds, runs):
-        fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth)
+        fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
+                            eps_v=res["curve"]["eps_v"])
         per.append({"seed": s, **fig, "past_peak": _past_peak(res["curve"], post_peak_strain),
                     "porosity": res.get("porosity"), "steps": res["steps"],
                     "wall_time": res["wall_time"], "key": res["key"]})
     rec = {k: float(np.mean([p[k] for p in per]))
-           for k in ("peak_q", "eps1_95", "secant", "eps1_peak", "peak_q_raw")}
+           for k in (*TOLERANCES, "eps1_peak", "peak_q_raw")}
     rec.update(compare(rec, hfig))
     for k in TOLERANCES:
         v = [p[k] for p in per]
@@ -111,7 +113,8 @@ def _header(target, space, base, seeds, initial, batch, max_evals, rate, confini
             "max_evals": max_evals, "rate": rate,
             "confining": confining, "eps_max": eps_max, "post_peak_strain": post_peak_strain,
             "smooth": smooth, "secant_strain": SECANT_STRAIN, "peak_fraction": PEAK_FRACTION,
-            "tolerances": TOLERANCES, "start_params": base.to_dict()}
+            "dilatancy_strain": DILATANCY_STRAIN, "tolerances": TOLERANCES,
+            "start_params": base.to_dict()}
 
 
 def _log(sink, res):
@@ -129,10 +132,22 @@ def current_params(d: dict) -> dict:
     return {**missing, **d}
 
 
-def read_checkpoint(path, header):
+def _older_targets(head, header):
+    """The checkpoint's header is that of a calibration with fewer targets (before the dilatancy
+    target of issue 34: no dilatancy_strain, the tolerances a subset of today's, equal where
+    both have them): its runs' curves hold eps_v, so every figure of today can be read off them."""
+    old, new = head.get("tolerances"), header.get("tolerances")
+    return (isinstance(old, dict) and isinstance(new, dict) and "dilatancy_strain" not in head
+            and set(old) < set(new) and all(old[k] == new[k] for k in old))
+
+
+def read_checkpoint(path, header, notes=None):
     """{key: record} of the finished evaluations of ``path`` made with the same options
     (ValueError naming what differs otherwise); a torn last line is dropped.  Parameters of
-    the file are read with ``current_params``."""
+    the file are read with ``current_params``.  A checkpoint of a calibration with fewer
+    targets (``_older_targets``) is taken when its runs' curves hold eps_v (a line appended to
+    ``notes``: the search is today's, its runs reused where it asks for the same sets), refused
+    in one line otherwise."""
     if not os.path.exists(path):
         return {}
     with open(path) as f:
@@ -148,6 +163,10 @@ def read_checkpoint(path, header):
         head["vary"] = [RENAMED.get(v, v) for v in head["vary"]]
     if isinstance(head.get("bounds"), dict):
         head["bounds"] = migrate(head["bounds"])
+    older = _older_targets(head, header)
+    if older:
+        head = {**head, "tolerances": header["tolerances"],
+                "dilatancy_strain": header.get("dilatancy_strain")}
     diff = [k for k in sorted(set(head) | set(header))
             if k not in RESUME_FREE and head.get(k) != header.get(k)]
     if diff:
@@ -171,6 +190,18 @@ def read_checkpoint(path, header):
             rec["params"] = current_params(rec["params"])
             rec["key"] = params_key(rec["params"])
             done[rec["key"]] = rec
+    if older:
+        old = json.loads(lines[0])["header"]["tolerances"]
+        new = [k for k in header["tolerances"] if k not in old]
+        where = f"--resume: {os.path.dirname(path) or '.'} was made with {len(old)} targets, " \
+                f"without {', '.join(new)} (before issue 34)"
+        if any("eps_v" not in r["curve"] for r in done.values()):
+            raise ValueError(f"{where}, and its runs hold no eps_v to read it from; allowed "
+                             "another --out")
+        if notes is not None:
+            notes.append(f"{where}: its {len(done)} runs are read with all "
+                         f"{len(header['tolerances'])} (their curves hold eps_v) and taken where "
+                         "today's search asks for the same sets")
     return done
 
 

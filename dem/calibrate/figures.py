@@ -12,7 +12,7 @@ import numpy as np
 
 from ..params import RENAMED, DemParams, migrate
 from .search import FigureModel, dense_points, make_space, space_dim_min
-from .targets import PEAK_FRACTION, TOLERANCES, _fmt_figs, _fmt_values
+from .targets import DILATANCY_STRAIN, PEAK_FRACTION, TOLERANCES, _fmt_figs, _fmt_values
 
 SEED_COLORS = ("C3", "C1", "C6", "C5", "C8")     # the calibrated set's seeds, one colour each
 START_SHADES = ("0.35", "0.65", "0.5", "0.8")    # the start set's seeds, greys
@@ -46,6 +46,18 @@ def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space):
         e = 100 * np.asarray(c["eps1"])
         axes[0].plot(e, np.asarray(c["q"]) / 1e3, ls, color=col, lw=lw, label=label)
         axes[1].plot(e, 100 * np.asarray(c["eps_v"]), ls, color=col, lw=lw, label=label)
+    # the dilatancy ratio's lines: eps_v's least-squares line over [eps1_95, eps1_95 + 1 %]
+    lines = [(hcurve, hfig.get("eps1_95"), "k")]
+    lines += [(c, p.get("eps1_95"), SEED_COLORS[i % len(SEED_COLORS)])
+              for i, (p, c) in enumerate(zip(best["seeds"], best["curves"]))]
+    for c, e95, col in lines:
+        e, v = np.asarray(c["eps1"], float), np.asarray(c["eps_v"], float)
+        m = (e >= e95 - 1e-12) & (e <= e95 + DILATANCY_STRAIN + 1e-12) if e95 is not None else []
+        if np.count_nonzero(m) >= 3:
+            a, b = np.polyfit(e[m], v[m], 1)
+            x = np.array([e[m][0], e[m][-1]])
+            axes[1].plot(100 * x, 100 * (a * x + b), "-", color=col, lw=5, alpha=0.3,
+                         solid_capstyle="butt")
     dots = [(hfig, "k", "o"), (start, START_SHADES[0], "o"), (best, "C3", "D")]
     dots += [(c, "C0", "o") for c in check]
     for r, col, mk in dots:
@@ -64,7 +76,9 @@ def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space):
     axes[1].set_ylabel("eps_v = eps1 + eps2 [%] (compression positive)")
     axes[0].set_title(f"deviatoric stress; dots: q at {PEAK_FRACTION:.0%} of the peak (the "
                       "DEM's: mean of the seeds),\ndotted box: its tolerances", fontsize=8)
-    axes[1].set_title("volumetric strain of the same runs (eps_v < 0: dilation)", fontsize=8)
+    axes[1].set_title("volumetric strain of the same runs (eps_v < 0: dilation); broad lines: "
+                      f"the slope read for the dilatancy ratio,\nover eps1_95 to eps1_95 + "
+                      f"{100 * DILATANCY_STRAIN:g} % (H-model, the seeds fitted on)", fontsize=8)
     fig.suptitle(f"the best set {_fmt_values(space.names, best['values'])}, mean of the seeds "
                  f"{','.join(map(str, seeds))}:\n{_fmt_figs(best)}", fontsize=8)
     handles, labels = axes[0].get_legend_handles_labels()
@@ -202,8 +216,10 @@ def redraw_figures(out_dir):
     inside = [(space.u_of(tuple(r["values"])), r) for r in records]
     inside = [(u, r) for u, r in inside if u is not None]
     if len(inside) >= space_dim_min(space):
+        # a folder of before the dilatancy target (issue 34): its own figures
+        names = [f for f in TOLERANCES if f in hfig and all(f in r for _, r in inside)]
         model = FigureModel([u for u, _ in inside],
-                            [[math.log(r[f] / hfig[f]) for f in TOLERANCES] for _, r in inside])
+                            [[math.log(r[f] / hfig[f]) for f in names] for _, r in inside], names)
         _score_figure(out_dir, space, records, best, model)
 
 

@@ -12,12 +12,13 @@ from common.io import atomic_write_bytes
 from .search import MARGIN_SIGMAS
 from .targets import FIGURE_TEXT, TOLERANCES, _fmt_figs, _fmt_values
 
-CSV_FIXED = ["peak_q", "eps1_95", "secant", "err_peak_q", "err_eps1_95", "err_secant",
-             "met_peak_q", "met_eps1_95", "met_secant", "met", "score", "eps1_peak",
-             "past_peak", "peak_q_raw", "spread_peak_q", "spread_eps1_95", "spread_secant",
-             "porosity", "steps", "wall_time"]
-RUN_FIXED = ["peak_q", "eps1_95", "secant", "eps1_peak", "past_peak", "peak_q_raw", "porosity",
-             "steps", "wall_time"]
+# the figures, their errors and met flags, met and score (summary.json's best and start)
+FIGURE_COLS = (list(TOLERANCES) + ["err_" + k for k in TOLERANCES]
+               + ["met_" + k for k in TOLERANCES] + ["met", "score"])
+CSV_FIXED = FIGURE_COLS + ["eps1_peak", "past_peak", "peak_q_raw"] + [
+    "spread_" + k for k in TOLERANCES] + ["porosity", "steps", "wall_time"]
+RUN_FIXED = list(TOLERANCES) + ["eps1_peak", "past_peak", "peak_q_raw", "porosity", "steps",
+                                "wall_time"]
 
 
 def _spread(records):
@@ -136,7 +137,8 @@ def _report(out_dir, s, space, records):
            f"stopped: **{s['stopped']}**.", "",
          "## Targets (H-model, Table I) and the best set (mean of the seeds)", "",
          "| figure | H-model | tolerance | best set | error |", "|---|---|---|---|---|"]
-    units = {"peak_q": (1e-3, "kPa"), "eps1_95": (100, "%"), "secant": (1e-6, "MPa")}
+    units = {"peak_q": (1e-3, "kPa"), "eps1_95": (100, "%"), "secant": (1e-6, "MPa"),
+             "dilatancy": (1, "-")}
     for k, tol in TOLERANCES.items():
         f, u = units[k]
         L.append(f"| {FIGURE_TEXT[k]} [{u}] | {hf[k] * f:.4g} | {tol:.0%} | {b[k] * f:.4g} | "
@@ -144,16 +146,17 @@ def _report(out_dir, s, space, records):
     L += ["", "Best set: " + _fmt_values(space.names, b["values"]) + f" (set {b['index']}, "
           f"{b['stage']}); eps1 at the peak itself {100 * b['eps1_peak']:.2f} % (H-model "
           f"{100 * hf['eps1_peak']:.2f} %; not a target: a plateau makes it arbitrary).", "",
-          "| seed | peak q [kPa] | eps1 at 95 % [%] | secant [MPa] | eps1 at the peak [%] | "
-          "porosity | fitted on |", "|---|---|---|---|---|---|---|"]
+          "| seed | peak q [kPa] | eps1 at 95 % [%] | secant [MPa] | dilatancy ratio [-] | "
+          "eps1 at the peak [%] | porosity | fitted on |", "|---|---|---|---|---|---|---|---|"]
     for p in s["best_seeds"]:
         L.append(f"| {p['seed']} | {p['peak_q'] / 1e3:.1f} | {100 * p['eps1_95']:.3f} | "
-                 f"{p['secant'] / 1e6:.1f} | {100 * p['eps1_peak']:.2f} | "
+                 f"{p['secant'] / 1e6:.1f} | {p['dilatancy']:.3f} | {100 * p['eps1_peak']:.2f} | "
                  f"{p['porosity'] if p['porosity'] is None else round(p['porosity'], 4)} | yes |")
     for c in s["check"]:
         L.append(f"| {c['seed']} | {c['peak_q'] / 1e3:.1f} ({c['err_peak_q']:+.1%}) | "
                  f"{100 * c['eps1_95']:.3f} ({c['err_eps1_95']:+.1%}) | {c['secant'] / 1e6:.1f} "
-                 f"({c['err_secant']:+.1%}) | {100 * c['eps1_peak']:.2f} | "
+                 f"({c['err_secant']:+.1%}) | {c['dilatancy']:.3f} ({c['err_dilatancy']:+.1%}) | "
+                 f"{100 * c['eps1_peak']:.2f} | "
                  f"{c['porosity'] if c['porosity'] is None else round(c['porosity'], 4)} | "
                  f"no (check: {'met' if c['met'] else 'NOT met'}) |")
     L += ["", "![curves](calibration.png)", "", "## The verdict", ""]

@@ -1,5 +1,5 @@
 """The calibration's search (``dem.calibrate``), pure numerics: no DEM run. The search space
-(``Space``, ``make_space``: u in [0, 1]^d <-> the varied fields' values), the model of the three
+(``Space``, ``make_space``: u in [0, 1]^d <-> the varied fields' values), the model of the four
 figures (``FigureModel``, a thin-plate-spline RBF per figure), what it says of the box
 (``analyse``, ``identifiability``) and the deterministic search (``surrogate_search``), which
 calls an ``evaluate`` function once per batch."""
@@ -99,7 +99,7 @@ def make_space(vary, base: DemParams, bounds=None) -> Space:
 
 
 # -- the search ---------------------------------------------------------------------------------
-# A surrogate of the three figures (not of the score): each figure is a smooth function of the
+# A surrogate of the four figures (not of the score): each figure is a smooth function of the
 # parameters, the score a sum of squares of them; a model of each figure also says which target
 # can be met where, so the search can show that two targets conflict.
 SMOOTHINGS = (0.0, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0)   # candidates of the RBF smoothing (LOO)
@@ -122,16 +122,19 @@ class FigureModel:
     The smoothing of each figure is chosen among SMOOTHINGS by leave-one-out (LOO) error: 0
     (interpolation) for an exact model, larger where the DEM's sample-to-sample scatter is;
     ``loo[k]`` (the RMS LOO error of y_k, i.e. a relative error) is the model's own error bar.
-    U: (n, d) array, Y: (n, 3) array (columns in the order of TOLERANCES)."""
+    U: (n, d) array, Y: (n, k) array (columns in the order of TOLERANCES, or of ``names``)."""
 
-    def __init__(self, U, Y):
+    def __init__(self, U, Y, names=None):
         from scipy.interpolate import RBFInterpolator
         self.U = np.asarray(U, float)
         self.Y = np.asarray(Y, float)
         n, d = self.U.shape
         if n < d + 2:
             raise ValueError(f"FigureModel: {n} points in {d} dimensions; needs at least {d + 2}")
-        self.names = tuple(TOLERANCES)
+        self.names = tuple(TOLERANCES) if names is None else tuple(names)   # Y's columns
+        if self.Y.ndim != 2 or self.Y.shape[1] != len(self.names):
+            raise ValueError(f"FigureModel: Y has {self.Y.shape[-1]} columns for the figures "
+                             f"{', '.join(self.names)}")
         loo = np.full((len(SMOOTHINGS), self.Y.shape[1]), np.inf)
         for i, s in enumerate(SMOOTHINGS):
             err = np.empty_like(self.Y)
@@ -164,7 +167,7 @@ class FigureModel:
         return nearest_distance(U, self.U)
 
     def __call__(self, U):
-        """Predicted y (m, 3) at u (m, d)."""
+        """Predicted y (m, k) at u (m, d)."""
         U = np.atleast_2d(np.asarray(U, float))
         return np.stack([f(U) for f in self._f], axis=1)
 
@@ -288,7 +291,7 @@ def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max
                      design_seed=0):
     """Global search of the parameter sets (module docstring): the start set, a space-filling
     design of ``initial`` Sobol points, then rounds of ``batch`` sets where the model of the
-    three figures (``FigureModel``, refitted on every evaluation inside the box) predicts the
+    four figures (``FigureModel``, refitted on every evaluation inside the box) predicts the
     lowest score, each at least MIN_DISTANCE from those evaluated.  Stops when an evaluated set
     meets every target, when the model shows that none within the box can (``analyse``: no
     point meets them all even with every target widened by the model's error bar there), or at

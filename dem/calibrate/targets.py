@@ -1,22 +1,24 @@
-"""The calibration's targets (``dem.calibrate``): the three figures of a drained biaxial curve
-(peak q, eps1 at PEAK_FRACTION of it, the secant modulus; ``curve_figures``), their tolerances and
-relative errors (``compare``, ``rank``), and the H-model's curve they are read from
-(``hmodel_curve``)."""
+"""The calibration's targets (``dem.calibrate``): the four figures of a drained biaxial curve
+(peak q, eps1 at PEAK_FRACTION of it, the secant modulus, the dilatancy ratio after eps1_95;
+``curve_figures``), their tolerances and relative errors (``compare``, ``rank``), and the
+H-model's curve they are read from (``hmodel_curve``)."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-TOLERANCES = {"peak_q": 0.05, "eps1_95": 0.25, "secant": 0.20}
+TOLERANCES = {"peak_q": 0.05, "eps1_95": 0.25, "secant": 0.20, "dilatancy": 0.05}
 PEAK_FRACTION = 0.95     # eps1_95: the first strain where q reaches this fraction of its peak
+DILATANCY_STRAIN = 0.01  # dilatancy: the slope of eps_v over eps1 in [eps1_95, eps1_95 + this]
 FIGURE_TEXT = {"peak_q": "peak q", "eps1_95": "eps1 at 95 % of the peak",
-               "secant": "secant modulus q/eps1 at eps1 = 0.25 %"}
+               "secant": "secant modulus q/eps1 at eps1 = 0.25 %",
+               "dilatancy": "dilatancy ratio 1 - d eps_v/d eps1 over 1 % after eps1_95"}
 SECANT_STRAIN = 0.0025
 TARGETS = ("hmodel",)
 
 
-# -- the three figures of a curve ----------------------------------------------------------------
+# -- the four figures of a curve -----------------------------------------------------------------
 def smoothed(eps1, q, window):
     """q averaged over eps1 in [e - window/2, e + window/2] at every point (window 0: q)."""
     e = np.asarray(eps1, float)
@@ -30,12 +32,30 @@ def smoothed(eps1, q, window):
     return (c[hi] - c[lo]) / (hi - lo)
 
 
-def curve_figures(eps1, q, smooth=0.001, secant_strain=SECANT_STRAIN) -> dict:
+def dilatancy_ratio(eps1, eps_v, start, width=DILATANCY_STRAIN):
+    """1 - d eps_v / d eps1 (compression positive; = -d eps2 / d eps1 in plane strain, Rowe's
+    strain-increment ratio: 1 at constant volume, above 1 where the sample dilates), the slope
+    being that of the least-squares line of eps_v over the records with eps1 in [start, start +
+    width].  A curve that stops before start + width: the records from start to its end; fewer
+    than 3 there: its last 3 records."""
+    e = np.asarray(eps1, float)
+    v = np.asarray(eps_v, float)
+    m = (e >= start - 1e-12) & (e <= start + width + 1e-12)
+    if m.sum() < 3:
+        m = np.zeros(len(e), bool)
+        m[-3:] = True
+    x = e[m] - e[m].mean()
+    return float(1.0 - np.dot(x, v[m] - v[m].mean()) / np.dot(x, x))
+
+
+def curve_figures(eps1, q, smooth=0.001, secant_strain=SECANT_STRAIN, eps_v=None) -> dict:
     """peak_q and eps1_peak (the maximum of q smoothed over the strain window ``smooth``),
     eps1_95 (the first eps1 where the smoothed q reaches PEAK_FRACTION of peak_q, linear
     between records), peak_q_raw (max q), secant = (q(secant_strain) - q(0)) / (secant_strain
-    - eps1(0)) with q interpolated linearly on the raw curve.  eps1 must increase; ValueError if
-    the curve stops before ``secant_strain``."""
+    - eps1(0)) with q interpolated linearly on the raw curve; with ``eps_v``, dilatancy =
+    ``dilatancy_ratio`` over [eps1_95, eps1_95 + DILATANCY_STRAIN] (the raw eps_v: the line
+    averages its noise).  eps1 must increase; ValueError if the curve stops before
+    ``secant_strain``."""
     e = np.asarray(eps1, float)
     q = np.asarray(q, float)
     if len(e) < 2 or not np.all(np.diff(e) > 0):
@@ -52,8 +72,13 @@ def curve_figures(eps1, q, smooth=0.001, secant_strain=SECANT_STRAIN) -> dict:
         e95 = e[0]
     else:
         e95 = e[j - 1] + (level - qs[j - 1]) / (qs[j] - qs[j - 1]) * (e[j] - e[j - 1])
-    return {"peak_q": float(qs[i]), "eps1_peak": float(e[i]), "eps1_95": float(e95),
-            "secant": float(sec), "peak_q_raw": float(np.max(q))}
+    out = {"peak_q": float(qs[i]), "eps1_peak": float(e[i]), "eps1_95": float(e95),
+           "secant": float(sec), "peak_q_raw": float(np.max(q))}
+    if eps_v is not None:
+        if len(eps_v) != len(e):
+            raise ValueError("curve_figures: eps_v and eps1 differ in length")
+        out["dilatancy"] = dilatancy_ratio(e, eps_v, e95)
+    return out
 
 
 def compare(fig, target) -> dict:
@@ -104,4 +129,6 @@ def _fmt_figs(rec):
     return (f"peak q = {rec['peak_q'] / 1e3:.1f} kPa ({rec['err_peak_q']:+.1%}), eps1 at "
             f"{PEAK_FRACTION:.0%} of it = {100 * rec['eps1_95']:.3f} % ({rec['err_eps1_95']:+.1%}"
             f"{'' if rec.get('past_peak', True) else ', not past the peak'}), secant = "
-            f"{rec['secant'] / 1e6:.1f} MPa ({rec['err_secant']:+.1%})")
+            f"{rec['secant'] / 1e6:.1f} MPa ({rec['err_secant']:+.1%})"
+            + (f", dilatancy ratio {rec['dilatancy']:.3f} ({rec['err_dilatancy']:+.1%})"
+               if "err_dilatancy" in rec else ""))

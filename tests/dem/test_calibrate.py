@@ -1,5 +1,5 @@
-"""`python -m dem calibrate` (dem/calibrate.py): the three figures of a curve (the strain at 95 %
-of the peak on a plateau), the global search (an analytic score with a local trap, targets that
+"""`python -m dem calibrate` (dem/calibrate.py): the four figures of a curve (the strain at 95 %
+of the peak on a plateau; the dilatancy ratio on lines, a plateau and noise), the global search (an analytic score with a local trap, targets that
 conflict, the model of the figures, identifiability), the seeds, the checkpoint (resume reruns
 nothing, refuses other options), the outputs, bad input.
 
@@ -106,14 +106,71 @@ def test_curve_must_increase_and_reach_the_secant_strain():
         C.curve_figures([0, 0.001, 0.002], [0, 1, 2])
 
 
+# -- the dilatancy ratio (issue 34) ---------------------------------------------------------------
+def test_dilatancy_ratio_of_a_linear_eps_v_is_its_slope_exactly():
+    """eps_v = a - s eps1: 1 - d eps_v/d eps1 = 1 + s, whatever the window, on records that
+    are not evenly spaced, and on a curve that stops inside the window (its records from the
+    start on; fewer than 3 there: its last 3)."""
+    rng = np.random.default_rng(3)
+    e = np.sort(rng.uniform(0.0, 0.04, 400))
+    for s in (0.0, 0.565, -0.3):
+        v = 2e-3 - s * e
+        for start, width in ((0.012, 0.01), (0.0, 0.04), (0.03, 0.005)):
+            assert C.dilatancy_ratio(e, v, start, width) == pytest.approx(1 + s, abs=1e-12)
+        assert C.dilatancy_ratio(e, v, 0.0395, 0.01) == pytest.approx(1 + s, abs=1e-12)
+        assert C.dilatancy_ratio(e, v, 0.05) == pytest.approx(1 + s, abs=1e-12)
+    # curve_figures reads it from eps1_95 on: the parabola's eps1_95, a line eps_v after it
+    e, q = _parabola(400e3, 0.02)
+    f95 = C.curve_figures(e, q, 0.0)["eps1_95"]
+    v = np.where(e < f95, 1e-3 * e / f95, 1e-3 - 0.6 * (e - f95))
+    f = C.curve_figures(e, q, 0.0, eps_v=v)
+    assert f["eps1_95"] == f95 and f["dilatancy"] == pytest.approx(1.6, abs=2e-3)
+    assert "dilatancy" not in C.curve_figures(e, q, 0.0)
+    with pytest.raises(ValueError, match="length"):
+        C.curve_figures(e, q, 0.0, eps_v=v[:-1])
+
+
+def _plateau_curve(rng, cut, noise_q=0.015, noise_v=2e-5, de=1e-4):
+    """q rising to 400 kPa by 1.2 %, then a plateau with noise of noise_q of the peak (whose
+    maximum lands anywhere on it); eps_v contracting to 0.15 % at 0.5 %, then dilating at a
+    rate falling from 0.7 to 0.5 over 1-3 %; noise noise_v on eps_v; the run cut at ``cut``."""
+    e = np.arange(0.0, cut + de / 2, de)
+    q = 400e3 * np.minimum(1.0, 1 - (1 - e / 0.012) ** 2 * (e < 0.012))
+    q = q + noise_q * 400e3 * rng.standard_normal(len(e)) * (e > 0.008)
+    rate = np.interp(e, [0.005, 0.01, 0.03], [0.0, 0.7, 0.5])
+    v = 0.0015 * np.minimum(e / 0.005, 1.0) - np.cumsum(rate) * de
+    return e, q, v + noise_v * rng.standard_normal(len(e))
+
+
+def test_dilatancy_ratio_neither_the_plateau_nor_the_cut_nor_the_noise_makes_it_arbitrary():
+    """On a noisy plateau cut at 2.5, 3 or 3.5 % (the strain of the peak lands anywhere on the
+    plateau), over 8 noise seeds: the dilatancy ratio read from eps1_95 on spreads by less than
+    1 %, while the slope over the records where q is within 95 % of its peak (a window the
+    plateau and the cut set) spreads by more than 3 times as much."""
+    dil, frac, peaks = [], [], []
+    for seed in range(8):
+        for cut in (0.025, 0.03, 0.035):
+            e, q, v = _plateau_curve(np.random.default_rng(seed), cut)
+            f = C.curve_figures(e, q, 0.001, eps_v=v)
+            dil.append(f["dilatancy"])
+            peaks.append(f["eps1_peak"])
+            m = C.smoothed(e, q, 0.001) >= 0.95 * f["peak_q"]
+            frac.append(1 - np.polyfit(e[m], v[m], 1)[0])
+    assert max(peaks) - min(peaks) > 0.01                  # the strain of the peak: arbitrary
+    spread = (max(dil) - min(dil)) / np.mean(dil)
+    assert spread < 0.01 and 1.6 < np.mean(dil) < 1.7
+    assert (max(frac) - min(frac)) / np.mean(frac) > 3 * spread
+
+
 def test_compare_errors_tolerances_and_score():
-    t = {"peak_q": 400e3, "eps1_95": 0.02, "secant": 90e6}
-    c = C.compare({"peak_q": 419e3, "eps1_95": 0.0149, "secant": 110e6}, t)
+    t = {"peak_q": 400e3, "eps1_95": 0.02, "secant": 90e6, "dilatancy": 1.5}
+    c = C.compare({"peak_q": 419e3, "eps1_95": 0.0149, "secant": 110e6, "dilatancy": 1.545}, t)
     assert c["err_peak_q"] == pytest.approx(0.0475)
     assert c["met_peak_q"] and not c["met_eps1_95"] and not c["met_secant"]
+    assert c["met_dilatancy"] and c["err_dilatancy"] == pytest.approx(0.03)
     assert not c["met"]
     assert c["score"] == pytest.approx((0.0475 / 0.05) ** 2 + (0.255 / 0.25) ** 2
-                                       + ((110 / 90 - 1) / 0.2) ** 2)
+                                       + ((110 / 90 - 1) / 0.2) ** 2 + (0.03 / 0.05) ** 2)
     assert C.compare(t, t)["met"] and C.compare(t, t)["score"] == 0.0
 
 
@@ -168,7 +225,7 @@ def test_space_maps_and_rounds():
 
 
 # -- the search on analytic figures ---------------------------------------------------------------
-T3 = {"peak_q": 428e3, "eps1_95": 0.0122, "secant": 90e6}
+T3 = {"peak_q": 428e3, "eps1_95": 0.0122, "secant": 90e6, "dilatancy": 1.565}
 
 
 def _space3():
@@ -201,7 +258,8 @@ def _trap(us, ut, W=0.08):
     def figs(u):
         return {"peak_q": T3["peak_q"] * (1 + 0.15 * h(u)),
                 "eps1_95": T3["eps1_95"] * (1 - 0.5 * h(u)),
-                "secant": T3["secant"] * (1 + 0.3 * (u[0] - us[0]))}
+                "secant": T3["secant"] * (1 + 0.3 * (u[0] - us[0])),
+                "dilatancy": T3["dilatancy"]}
     return figs, h
 
 
@@ -234,7 +292,8 @@ def _conflict(gap):
     def figs(u):
         return {"peak_q": T3["peak_q"] * (1 + 0.2 * (u[1] - 0.2)),
                 "eps1_95": T3["eps1_95"] * (1 - 0.25 * (0.7 + gap - u[1]) / 0.25),
-                "secant": T3["secant"] * (1 + 0.2 * (u[0] - 0.5))}
+                "secant": T3["secant"] * (1 + 0.2 * (u[0] - 0.5)),
+                "dilatancy": T3["dilatancy"]}
     return figs
 
 
@@ -279,17 +338,41 @@ def test_figure_model_is_exact_on_a_linear_figure_and_its_error_bar_sees_noise()
     U = rng.uniform(0, 1, (30, 2))
     lin = 0.3 * U[:, 0] - 0.1 * U[:, 1] + 0.02
     noisy = 0.2 * np.sin(3 * U[:, 0]) + rng.normal(0, 0.03, 30)
-    m = C.FigureModel(U, np.column_stack([lin, noisy, lin]))
+    m = C.FigureModel(U, np.column_stack([lin, noisy, lin, lin]))
     assert m.loo["peak_q"] < 1e-9
     # the noisy figure: its leave-one-out error is of the order of the noise (0.03); the same
     # figure without noise: an error bar five times smaller (the 30 sets' own interpolation error)
     assert 0.015 < m.loo["eps1_95"] < 0.06
-    exact = C.FigureModel(U, np.column_stack([lin, 0.2 * np.sin(3 * U[:, 0]), lin]))
+    exact = C.FigureModel(U, np.column_stack([lin, 0.2 * np.sin(3 * U[:, 0]), lin, lin]))
     assert exact.loo["eps1_95"] < 0.2 * m.loo["eps1_95"]
     u = np.array([[0.37, 0.61]])
     assert m(u)[0, 0] == pytest.approx(0.3 * 0.37 - 0.1 * 0.61 + 0.02, abs=1e-9)
     with pytest.raises(ValueError, match="at least 4"):
         C.FigureModel(U[:3], np.column_stack([lin, lin, lin])[:3])
+
+
+def test_search_names_the_dilatancy_when_it_conflicts_with_the_peak():
+    """Peak q met for u1 <= 0.45, the dilatancy ratio only for u1 >= 0.6 (as friction and
+    rolling resistance trading strength for dilatancy), the other two almost everywhere: the
+    search ends with the proof, names that pair, and the verdict names the dilatancy ratio."""
+    from dem.calibrate.report import _verdict
+    space = _space()
+
+    def figs(u):
+        return {"peak_q": T3["peak_q"] * (1 + 0.2 * (u[1] - 0.2)),
+                "eps1_95": T3["eps1_95"] * (1 + 0.1 * (u[0] - 0.5)),
+                "secant": T3["secant"] * (1 + 0.2 * (u[0] - 0.5)),
+                "dilatancy": T3["dilatancy"] * (1 - 0.05 * (0.85 - u[1]) / 0.25)}
+    log = []
+    best, seen, trace, why, info = C.surrogate_search(space, _analytic(space, figs, log), T3,
+                                                      start=(32e9, 35.0), initial=8,
+                                                      max_evals=60)
+    assert why == "no set within the bounds meets the targets" and not best["met"]
+    assert info["conflicts"] == ["peak_q+dilatancy"] and info["unreachable_targets"] == []
+    v = _verdict(space, list(seen.values()), best, T3, why, info, [])
+    assert not v["pairs_met_together"]["peak_q+dilatancy"]
+    proof = next(t for t in v["text"] if "pairs no set meets together" in t)
+    assert "pairs no set meets together: peak q and " + C.FIGURE_TEXT["dilatancy"] in proof
 
 
 def test_identifiability_names_the_parameter_the_targets_do_not_fix():
@@ -302,7 +385,8 @@ def test_identifiability_names_the_parameter_the_targets_do_not_fix():
     def figs(u):
         return {"peak_q": T3["peak_q"] * (1 + 0.3 * (u[1] - us[1])),
                 "eps1_95": T3["eps1_95"] * (1 - 1.0 * (u[0] - us[0])),
-                "secant": T3["secant"] * (1 + 0.5 * (u[0] - us[0]) + 0.2 * (u[1] - us[1]))}
+                "secant": T3["secant"] * (1 + 0.5 * (u[0] - us[0]) + 0.2 * (u[1] - us[1])),
+                "dilatancy": T3["dilatancy"]}
     U = C.initial_design(3, 32, 0)
     Y = [[math.log(figs(u)[k] / T3[k]) for k in C.TOLERANCES] for u in U]
     m = C.FigureModel(U, Y)
@@ -375,6 +459,18 @@ def test_outputs_and_resume_reruns_nothing(tmp_path):
     summ = json.loads((tmp_path / "summary.json").read_text())
     assert summ["options"]["vary"] == ["kn_over_d", "phi_g"]
     assert summ["target_figures"]["peak_q"] == pytest.approx(428.3e3, rel=1e-3)
+    # the fourth target, the dilatancy ratio (issue 34), by default everywhere
+    assert list(C.TOLERANCES) == ["peak_q", "eps1_95", "secant", "dilatancy"]
+    assert summ["tolerances"] == C.TOLERANCES == summ["options"]["tolerances"]
+    assert summ["options"]["dilatancy_strain"] == C.DILATANCY_STRAIN == 0.01
+    assert summ["target_figures"]["dilatancy"] == pytest.approx(1.565, abs=0.005)
+    assert summ["best"]["met_dilatancy"] and abs(summ["best"]["err_dilatancy"]) <= 0.05
+    assert "dilatancy" in summ["start"] and "dilatancy" in summ["seeds_spread"]
+    assert [l["figure"] for l in summ["verdict"]["lines"]] == list(C.FIGURE_TEXT.values())
+    assert "dilatancy" in summ["best_seeds"][0] and "err_dilatancy" in summ["check"][0]
+    assert float(rows[0]["dilatancy"]) == pytest.approx(summ["target_figures"]["dilatancy"])
+    assert "dilatancy" in _csv(tmp_path / "calibration_runs.csv")[0]
+    assert C.FIGURE_TEXT["dilatancy"] in report
     before = (tmp_path / "calibration.csv").read_text()
     lines = (tmp_path / "evaluations.jsonl").read_text().count("\n")
     # --resume: nothing runs, the same outputs
@@ -410,6 +506,48 @@ def test_resume_reads_a_checkpoint_of_a_version_without_a_newer_field(tmp_path):
                           vary=("kn_over_d", "phi_g"), bounds={"kn_over_d": (2e9, 32e9)},
                           initial=8, max_evals=5, workers=1, verbose=False,
                           task=_synthetic_task, resume=True, seeds=(3, 4), check_seeds=(5,))
+
+
+def _three_targets(lines, drop_eps_v=False):
+    """A checkpoint as written before the dilatancy target: no dilatancy_strain, three
+    tolerances (and, with drop_eps_v, runs without eps_v)."""
+    h = lines[0]["header"]
+    del h["dilatancy_strain"]
+    del h["tolerances"]["dilatancy"]
+    for r in lines[1:]:
+        if drop_eps_v:
+            del r["curve"]["eps_v"]
+    return "\n".join(json.dumps(r) for r in lines) + "\n"
+
+
+def test_resume_takes_a_checkpoint_of_three_targets_in_one_line(tmp_path, capsys):
+    """A checkpoint made with the three targets of before issue 34: --resume reads its runs
+    with four (their curves hold eps_v), runs none of them again, says so in one line and
+    rewrites the header with four; one whose runs hold no eps_v is refused in one line."""
+    CALLS["n"] = 0
+    ref = _run(tmp_path, max_evals=5)
+    ck = tmp_path / "evaluations.jsonl"
+    lines = [json.loads(l) for l in ck.read_text().splitlines()]
+    ck.write_text(_three_targets(json.loads(json.dumps(lines))))
+    notes = []
+    header = json.loads(ck.read_text().splitlines()[0])["header"]
+    header.update(tolerances=C.TOLERANCES, dilatancy_strain=C.DILATANCY_STRAIN)
+    assert len(C.read_checkpoint(str(ck), header, notes)) == 11
+    assert len(notes) == 1 and "\n" not in notes[0] and "dilatancy" in notes[0]
+    capsys.readouterr()
+    CALLS["n"] = 0
+    s = _run(tmp_path, max_evals=5, resume=True, verbose=True)
+    err = capsys.readouterr().err
+    assert CALLS["n"] == 0 and s["taken_from_checkpoint"] == 11
+    assert sum("made with 3 targets, without dilatancy" in l for l in err.splitlines()) == 1
+    assert s["best"]["dilatancy"] == ref["best"]["dilatancy"]
+    assert json.loads(ck.read_text().splitlines()[0])["header"]["tolerances"] == C.TOLERANCES
+    # runs without eps_v cannot give the fourth figure: refused, in one line, nothing written
+    bad = _three_targets(json.loads(json.dumps(lines)), drop_eps_v=True)
+    ck.write_text(bad)
+    with pytest.raises(ValueError, match="hold no eps_v") as e:
+        _run(tmp_path, max_evals=5, resume=True)
+    assert "\n" not in str(e.value) and ck.read_text() == bad
 
 
 @pytest.mark.parametrize("change,what", [({"base_n": 120}, "n"), ({"vary": ("kn_over_d",)}, "vary"),

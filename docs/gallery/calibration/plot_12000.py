@@ -5,7 +5,7 @@
 
 NEW and OLD are `python -m dem biaxial --params calibrated.json --n 12000 --no-vtk --out DIR`
 runs of this folder's calibrated.json and of before_issue27/calibrated.json.  The figures (peak
-q, eps1 at 95 % of it, secant) are read as `dem calibrate` reads them (dem.calibrate.curve_figures,
+q, eps1 at 95 % of it, secant, dilatancy ratio) are read as `dem calibrate` reads them (dem.calibrate.curve_figures,
 0.1 % window) and printed."""
 import csv
 import sys
@@ -26,7 +26,7 @@ def read(path):
 
 def main(new, old, out):
     h = hmodel_curve()
-    hf = curve_figures(h["eps1"], h["q"], 0.0)
+    hf = curve_figures(h["eps1"], h["q"], 0.0, eps_v=h["eps_v"])
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.3))
     ax[0].plot(100 * np.asarray(h["eps1"]), np.asarray(h["q"]) / 1e3, "k-", lw=1.6,
                label="H-model (Table I)")
@@ -35,11 +35,12 @@ def main(new, old, out):
     for path, label, col in ((new, "calibrated (issue 27)", "C3"),
                              (old, "the set before issue 27", "0.55")):
         e, q, ev = read(path)
-        f = curve_figures(e, q, 0.001)
+        f = curve_figures(e, q, 0.001, eps_v=ev)
         c = compare(f, hf)
         text = ", ".join(f"{k} {c['err_' + k]:+.1%}" for k in TOLERANCES)
         print(f"{label}: peak q {f['peak_q'] / 1e3:.1f} kPa at {100 * f['eps1_peak']:.2f} %, "
-              f"eps1_95 {100 * f['eps1_95']:.3f} %, secant {f['secant'] / 1e6:.1f} MPa ({text})")
+              f"eps1_95 {100 * f['eps1_95']:.3f} %, secant {f['secant'] / 1e6:.1f} MPa, dilatancy ratio "
+              f"{f['dilatancy']:.3f} ({text})")
         ax[0].plot(100 * e, q / 1e3, "-", color=col, lw=1.1, label=f"DEM 12,000 disks, {label}: {text}")
         ax[1].plot(100 * e, 100 * ev, "-", color=col, lw=1.1)
         ax[0].plot([100 * f["eps1_95"]], [PEAK_FRACTION * f["peak_q"] / 1e3], "o", color=col, ms=5)

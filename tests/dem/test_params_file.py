@@ -53,7 +53,7 @@ def test_files_with_the_friction_key_before_phi_g_still_load(tmp_path, capsys):
     (tmp_path / "old_plain.json").write_text(json.dumps(old))
     assert load_params(tmp_path / "old_plain.json") == DemParams(n=300, phi_g=25.0)
     assert DemParams.from_dict(old) == DemParams(n=300, phi_g=25.0)     # states, summaries
-    for gallery in ("calibration/params.json",):   # written before (burst/dem's was rerun since)
+    for gallery in ("calibration/before_issue34/params.json",):   # written before the renaming
         text = (Path(__file__).parents[2] / "docs" / "gallery" / gallery).read_text()
         assert '"friction_deg"' in text
         assert load_params(Path(__file__).parents[2] / "docs" / "gallery" / gallery).phi_g > 0

@@ -454,7 +454,7 @@ VOCABULARY = {t.name: t for t in (
     _T("--seeds", "comma-separated samples (seeds) every set is run on; its figures are their "
        "means", None, "text"),
     _T("--check-seeds", "comma-separated samples (seeds) the best set is then run on, not among "
-       "--seeds", None, "text"),
+       "--seeds; the check's verdict is their mean", None, "text"),
     _T("--initial", "sets of the space-filling (Sobol) design before the model proposes any (at "
        "least the varied parameters + 2)", "-", "int", 3, 4096, False, False),
     _T("--batch", "sets the model proposes per round", "-", "int", 1, 64, False, False),

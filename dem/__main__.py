@@ -454,8 +454,8 @@ def build_parser() -> opt.Parser:
     add(g, "--bounds", parse=bounds_type, default_text="kn_over_d 2e9:32e9 log, phi_g 10:50, "
         "kt_over_kn 0.2:1, rolling_friction 0:0.3, rolling_stiffness 0.25:4 log; others 0.5-2 x "
         "the start value")
-    add(g, "--seeds", (1, 2), parse=seeds_type)
-    add(g, "--check-seeds", (3,), parse=seeds_type)
+    add(g, "--seeds", (1, 2, 3, 4), parse=seeds_type)
+    add(g, "--check-seeds", (5, 6, 7, 8), parse=seeds_type)
     add(g, "--initial", 16)
     add(g, "--batch", 1)
     add(g, "--max-evals", 32)

@@ -17,8 +17,8 @@ from common.io import atomic_write_bytes
 
 from ..params import DemParams, record_params, save_params
 from .cli import parse_seeds, resolve_field
-from .evaluation import (_combine, _evaluate_task, _header, _log, _past_peak, params_key,
-                         read_checkpoint)
+from .evaluation import (_check_mean, _combine, _evaluate_task, _header, _log, _past_peak,
+                         _sample_scatter, params_key, read_checkpoint)
 from .figures import _figure, _score_figure, _search_figure
 from .report import FIGURE_COLS, _report, _spread, _verdict, _write_csv, _write_runs_csv
 from .search import (FigureModel, dense_points, identifiability, make_space, space_dim_min,
@@ -33,7 +33,7 @@ def _say(verbose, msg):
 
 
 def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel",
-                    seeds=(1, 2), check_seeds=(3,), initial=16, batch=1, max_evals=32,
+                    seeds=(1, 2, 3, 4), check_seeds=(5, 6, 7, 8), initial=16, batch=1, max_evals=32,
                     rate=0.01, confining=200e3, eps_max=0.035, post_peak_strain=0.01,
                     smooth=0.001, workers=None, scheduler=None, resume=False, verbose=True,
                     task=None, stage=None, params_note=None):
@@ -191,6 +191,7 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
         best, seen, trace, why, info = surrogate_search(
             space, evaluate, hfig, start=start, initial=initial, max_evals=max_evals, batch=batch)
         check = []
+        check_mean = None
         if check_seeds:
             got = run_sets([tuple(best["values"])], "check", check_seeds)
             for s in check_seeds:
@@ -204,6 +205,11 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                 _say(verbose, f"[calibrate] check: the best set on seed {s} (not fitted on): "
                               f"{_fmt_figs(check[-1])}"
                               f"{'; meets all targets' if check[-1]['met'] else ''}")
+            check_mean = _check_mean(check, hfig)
+            _say(verbose, f"[calibrate] check: the best set, mean of seeds "
+                          f"{','.join(map(str, check_seeds))} (not fitted on): "
+                          f"{_fmt_figs(check_mean)}"
+                          f"{'; MEETS ALL TARGETS' if check_mean['met'] else ''}")
     finally:
         sink.close()
     start_rec = records[0]
@@ -233,11 +239,11 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
         ub = space.u_of(tuple(best["values"]))
         if ub is not None:
             ident = identifiability(model, space, ub, dense)
-    _figure(out_dir, hcurve, hfig, start_rec, best, check, start_label, space)
+    _figure(out_dir, hcurve, hfig, start_rec, best, check, start_label, space, check_mean)
     _search_figure(out_dir, space, records, best)
     if model is not None:
         _score_figure(out_dir, space, records, best, model)
-    verdict = _verdict(space, records, best, hfig, why, info, check)
+    verdict = _verdict(space, records, best, hfig, why, info, check, check_mean)
     summary = {"target": target, "target_figures": hfig, "tolerances": TOLERANCES,
                "peak_fraction": PEAK_FRACTION, "options": header, "stopped": why,
                "evaluations": len(records), "runs": len(records) * len(seeds) + len(check),
@@ -249,6 +255,9 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
                "best_seeds": [{k: v for k, v in p.items() if k != "key"} for p in best["seeds"]],
                "best_params": {f: v for f, v in zip(space.names, best["values"])},
                "check": [{k: v for k, v in c.items() if k != "curve"} for c in check],
+               "check_mean": check_mean,
+               "check_met": None if check_mean is None else check_mean["met"],
+               "sample_scatter": _sample_scatter(best["seeds"] + check, len(seeds), len(check)),
                "seeds_spread": _spread(records),
                "model": info, "identifiability": ident,
                "start": {k: start_rec[k] for k in ["values", "score", "met", "past_peak"]

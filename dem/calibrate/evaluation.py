@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -77,6 +78,44 @@ def _past_peak(curve, post_peak_strain):
     return bool(e[-1] >= e[i] + post_peak_strain and q[-1] < 0.98 * q[i])
 
 
+def _mean_figures(per, hfig):
+    """The figures of a set of samples: each the mean over the samples ``per`` (dicts of one
+    run's figures), with their errors against the target ``hfig`` (``compare``).  The targets
+    are a set's means by definition: a single 2000-disk sample scatters by about a tolerance
+    (docs/dem.md, "A sample's scatter")."""
+    rec = {k: float(np.mean([p[k] for p in per]))
+           for k in (*TOLERANCES, "eps1_peak", "peak_q_raw")}
+    rec.update(compare(rec, hfig))
+    return rec
+
+
+def _check_mean(check, hfig):
+    """The check's verdict: the best set's figures as the mean over the check seeds (each run's
+    figures in ``check``), compared with the targets as the fit compares the mean over its
+    seeds; ``seeds`` lists them."""
+    rec = _mean_figures(check, hfig)
+    rec["seeds"] = [c["seed"] for c in check]
+    return rec
+
+
+def _sample_scatter(per, n_fit, n_check):
+    """The scatter of one sample's figures about the set's mean, from the best set's runs
+    ``per`` (fit and check seeds): for each figure the relative standard deviation of a single
+    run (sd / mean, ddof 1), the number of runs, and the standard errors of the means over the
+    n_fit fitted and n_check check seeds (sd / sqrt(n)), beside the tolerance.  None with
+    fewer than two runs."""
+    if len(per) < 2:
+        return None
+    out = {}
+    for k in TOLERANCES:
+        v = np.array([p[k] for p in per], float)
+        sd = float(np.std(v, ddof=1) / np.mean(v))
+        out[k] = {"sd": sd, "runs": len(v), "se_fit": sd / math.sqrt(n_fit),
+                  "se_check": sd / math.sqrt(n_check) if n_check else None,
+                  "tolerance": TOLERANCES[k]}
+    return out
+
+
 def _combine(runs, seeds, smooth, post_peak_strain, hfig):
     """The record of one parameter set from its runs (one per seed): the figures are the means
     over the seeds, spread_X = (max - min) / mean of figure X over them."""
@@ -87,9 +126,7 @@ def _combine(runs, seeds, smooth, post_peak_strain, hfig):
         per.append({"seed": s, **fig, "past_peak": _past_peak(res["curve"], post_peak_strain),
                     "porosity": res.get("porosity"), "steps": res["steps"],
                     "wall_time": res["wall_time"], "key": res["key"]})
-    rec = {k: float(np.mean([p[k] for p in per]))
-           for k in (*TOLERANCES, "eps1_peak", "peak_q_raw")}
-    rec.update(compare(rec, hfig))
+    rec = _mean_figures(per, hfig)
     for k in TOLERANCES:
         v = [p[k] for p in per]
         rec["spread_" + k] = float((max(v) - min(v)) / np.mean(v))

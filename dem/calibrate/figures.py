@@ -18,12 +18,12 @@ SEED_COLORS = ("C3", "C1", "C6", "C5", "C8")     # the calibrated set's seeds, o
 START_SHADES = ("0.35", "0.65", "0.5", "0.8")    # the start set's seeds, greys
 
 
-def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space):
+def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space, check_mean=None):
     """calibration.png: q (left) and eps_v (right) against eps1 of the H-model, the start set
     (a grey per seed) and the best set (a colour per seed it was fitted on, the check seeds
-    dashed), the points at 95 % of the peak (the sets' means of the seeds) and the tolerance box
-    of (eps1_95, 0.95 peak q) on the left; the best set's figures above; one legend below the
-    panels, off the curves."""
+    dashed), the points at 95 % of the peak (the sets' means of the seeds, the check seeds'
+    mean, each check seed small) and the tolerance box of (eps1_95, 0.95 peak q) on the left;
+    the best set's figures above; one legend below the panels, off the curves."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -40,8 +40,10 @@ def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space):
                for i, (s, c) in enumerate(zip(start_seeds, start["curves"]))]
     curves += [(c, f"calibrated set, seed {s} (fitted on)", SEED_COLORS[i % len(SEED_COLORS)],
                 "-", 1.0) for i, (s, c) in enumerate(zip(seeds, best["curves"]))]
-    curves += [(c["curve"], f"calibrated set, seed {c['seed']} (dashed: not fitted on)", "C0",
-                "--", 1.0) for c in check]
+    check_label = (f"calibrated set, seed{'s' if len(check) > 1 else ''} "
+                   f"{','.join(str(c['seed']) for c in check)} (dashed: not fitted on)")
+    curves += [(c["curve"], check_label if i == 0 else "_nolegend_", "C0", "--", 0.8)
+               for i, c in enumerate(check)]
     for c, label, col, ls, lw in curves:
         e = 100 * np.asarray(c["eps1"])
         axes[0].plot(e, np.asarray(c["q"]) / 1e3, ls, color=col, lw=lw, label=label)
@@ -58,11 +60,13 @@ def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space):
             x = np.array([e[m][0], e[m][-1]])
             axes[1].plot(100 * x, 100 * (a * x + b), "-", color=col, lw=5, alpha=0.3,
                          solid_capstyle="butt")
-    dots = [(hfig, "k", "o"), (start, START_SHADES[0], "o"), (best, "C3", "D")]
-    dots += [(c, "C0", "o") for c in check]
-    for r, col, mk in dots:
+    dots = [(hfig, "k", "o", 6), (start, START_SHADES[0], "o", 6), (best, "C3", "D", 6)]
+    dots += [(c, "C0", "o", 3.5) for c in check]
+    if check_mean is not None:
+        dots.append((check_mean, "C0", "D", 6))
+    for r, col, mk, ms in dots:
         axes[0].plot([100 * r["eps1_95"]], [PEAK_FRACTION * r["peak_q"] / 1e3], mk, color=col,
-                     mec="k", mew=0.6, ms=6, zorder=5)
+                     mec="k", mew=0.6, ms=ms, zorder=5)
     # the tolerance box of the point at 95 % of the peak
     e0, q0 = 100 * hfig["eps1_95"], PEAK_FRACTION * hfig["peak_q"] / 1e3
     te, tq = TOLERANCES["eps1_95"], TOLERANCES["peak_q"]
@@ -84,6 +88,10 @@ def _figure(out_dir, hcurve, hfig, start, best, check, start_label, space):
     handles, labels = axes[0].get_legend_handles_labels()
     handles.append(Line2D([], [], ls="none", marker="D", color="C3", mec="k", mew=0.6, ms=6))
     labels.append(f"the best set at {PEAK_FRACTION:.0%} of its peak (mean of the seeds)")
+    if check_mean is not None:
+        handles.append(Line2D([], [], ls="none", marker="D", color="C0", mec="k", mew=0.6,
+                              ms=6))
+        labels.append("the same, mean of the check seeds (small dots: each of them)")
     fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=7, frameon=False)
     _save(fig, out_dir, "calibration.png")
 
@@ -211,7 +219,7 @@ def redraw_figures(out_dir):
     check = [dict(c, curve=curves[("dem_calibrated_check", c["seed"])]) for c in s["check"]
              if ("dem_calibrated_check", c["seed"]) in curves]
     _figure(out_dir, hcurve, hfig, start, best, check, s.get("start_label", "DEM, start set"),
-            space)
+            space, s.get("check_mean"))
     _search_figure(out_dir, space, records, best)
     inside = [(space.u_of(tuple(r["values"])), r) for r in records]
     inside = [(u, r) for u, r in inside if u is not None]

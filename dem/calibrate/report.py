@@ -59,10 +59,11 @@ def _write_runs_csv(out_dir, space, records, check, best):
     io.write_csv(os.path.join(out_dir, "calibration_runs.csv"), cols, rows)
 
 
-def _verdict(space, records, best, hfig, why, info, check):
+def _verdict(space, records, best, hfig, why, info, check, check_mean=None):
     """Which targets the best set meets, why the search stopped, what the model says of the
     box (reachable or not, the targets no set meets, the pairs no set meets together), for each
-    target the best set misses the closest any set came, and the check on the other seeds."""
+    target the best set misses the closest any set came, and the check on the other seeds: its
+    verdict the mean over them (``check_mean``), each seed's figures beside it."""
     lines = []
     for k, tol in TOLERANCES.items():
         e = best["err_" + k]
@@ -112,8 +113,14 @@ def _verdict(space, records, best, hfig, why, info, check):
             s += (f"; closest of all sets {c['error']:+.1%} (set {c['index']}, "
                   f"{_fmt_values(c['params'], c['params'].values())})")
         text.append(s)
+    if check_mean is not None:
+        miss = [FIGURE_TEXT[k] for k in TOLERANCES if not check_mean["met_" + k]]
+        text.append(f"check, the mean of seeds {','.join(map(str, check_mean['seeds']))} (not "
+                    f"fitted on): {_fmt_figs(check_mean)}: "
+                    + ("meets all targets" if check_mean["met"]
+                       else f"NOT all targets met (missed: {', '.join(miss)})"))
     for c in check:
-        text.append(f"check on seed {c['seed']} (not fitted on): {_fmt_figs(c)}: "
+        text.append(f"check on seed {c['seed']} (not fitted on), one sample: {_fmt_figs(c)}: "
                     f"{'meets all targets' if c['met'] else 'NOT all targets met'}")
     return {"lines": lines, "pairs_met_together": pairs, "text": text}
 
@@ -159,6 +166,14 @@ def _report(out_dir, s, space, records):
                  f"{100 * c['eps1_peak']:.2f} | "
                  f"{c['porosity'] if c['porosity'] is None else round(c['porosity'], 4)} | "
                  f"no (check: {'met' if c['met'] else 'NOT met'}) |")
+    cm = s.get("check_mean")
+    if cm is not None:
+        L.append(f"| mean of {', '.join(map(str, cm['seeds']))} | {cm['peak_q'] / 1e3:.1f} "
+                 f"({cm['err_peak_q']:+.1%}) | {100 * cm['eps1_95']:.3f} "
+                 f"({cm['err_eps1_95']:+.1%}) | {cm['secant'] / 1e6:.1f} ({cm['err_secant']:+.1%}) "
+                 f"| {cm['dilatancy']:.3f} ({cm['err_dilatancy']:+.1%}) | "
+                 f"{100 * cm['eps1_peak']:.2f} | | no: **the check, "
+                 f"{'met' if cm['met'] else 'NOT met'}** |")
     L += ["", "![curves](calibration.png)", "", "## The verdict", ""]
     L += [f"- {t}" for t in s["verdict"]["text"]]
     L += ["", "## The score against each parameter", "",
@@ -170,6 +185,21 @@ def _report(out_dir, s, space, records):
           "| figure | mean | largest | tolerance |", "|---|---|---|---|"]
     for k, v in s["seeds_spread"].items():
         L.append(f"| {FIGURE_TEXT[k]} | {v['mean']:.1%} | {v['max']:.1%} | {v['tolerance']:.0%} |")
+    sc = s.get("sample_scatter")
+    if sc is not None:
+        n_fit, n_check = len(s["options"]["seeds"]), len(s["check"])
+        L += ["", "## A sample's scatter", "",
+              f"The best set's {next(iter(sc.values()))['runs']} runs (the seeds fitted on and "
+              "the check seeds): the relative standard deviation of one run's figure about "
+              f"their mean, and the standard errors of the mean over the {n_fit} seeds fitted "
+              f"on and over the {n_check} check seeds. A target is a set's mean: the check "
+              "compares the check seeds' mean with it, as the fit compares its seeds' mean.", "",
+              "| figure | one run (sd / mean) | mean of the fit | mean of the check | "
+              "tolerance |", "|---|---|---|---|---|"]
+        for k, v in sc.items():
+            se_c = "" if v["se_check"] is None else f"{v['se_check']:.1%}"
+            L.append(f"| {FIGURE_TEXT[k]} | {v['sd']:.1%} | {v['se_fit']:.1%} | {se_c} | "
+                     f"{v['tolerance']:.0%} |")
     m = s["model"]
     if m is not None:
         L += ["", "## The model of the figures", "",

@@ -11,7 +11,6 @@ Calls dem.bench.bench (the same function as `python -m dem bench`) and compares 
 Usage: python bench/bench_dem.py [--sizes 300,2000,12000] [--steps 2000] [--rounds 3]
 """
 import argparse
-import math
 import os
 import time
 

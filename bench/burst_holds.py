@@ -12,7 +12,6 @@ lines on stdout.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 from dataclasses import dataclass, asdict, field, replace
 from pathlib import Path
@@ -24,8 +23,8 @@ from .indicators import GlobalCheck, GlobalCheckProcess, global_w2, local_indica
 from .mesh import _count, rectangle, from_file
 from hmodel.params import record_params
 
-from .output import (CurveWriter, FieldWriter, plot_curve, read_curve, first_events, cell_tensor,
-                     nodal_vector, mode_fields, plot_mode)
+from .output import (CurveWriter, FieldWriter, plot_curve, first_events, cell_tensor, nodal_vector,
+                     mode_fields, plot_mode)
 from .problem import Biaxial, Imperfection
 from .reference import material_point_curve
 from .solver import LoadStepper, StaticLoss

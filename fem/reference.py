@@ -20,7 +20,7 @@ import numpy as np
 
 from hmodel import HParams
 from hmodel.driver import (MixedControl, isotropic_state, mixed_step, run_path, drained_biaxial,
-                           proportional_strain, stress_invariants)
+                           stress_invariants)
 from hmodel.burst import CPeak, proportional_path
 from hmodel.experiment import state_at_eta
 from hmodel.material import to_voigt

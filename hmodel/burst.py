@@ -34,10 +34,12 @@ import numpy as np
 from .burst_rule import (RELEASE, BurstRule, EnergyCheck, check_columns, decide as decide_outcome,
                          ke_growth, release_columns)
 from .controllability import control_scan, decide, verdict_text
-from .driver import (MAX_CUTS, MixedControlError, PathResult, mixed_step, proportional_strain,
-                     proportional_strain_stress, run_path, stress_invariants)
+from .driver import (MAX_CUTS, MixedControlError, PathResult, drained_biaxial, isotropic_state,
+                     mixed_step, proportional_strain, proportional_strain_stress, run_path,
+                     stress_invariants)
 from .experiment import DOMAIN_EPS1_MAX, biaxial_test, state_at_eta
 from .material import HState, stress_work, to_voigt, update, update_full
+from .probes import arcs, directional_sweep, strain_probes
 from .params import HParams
 
 __all__ = ["check_ratio", "Specimen", "Dynamics", "PathInfo", "HoldResult", "conjugate_stress", "path_direction",
@@ -605,8 +607,6 @@ def cone_entries(params: HParams, ratios, d_eps1: float = 1e-5, check_every: int
     then bisection within the block (a direction that enters the cone stays in it up to the
     peak, as the domain's bisection assumes). Returns {R: {"alpha_eps" [deg], "eta", "eps1"}},
     eta and eps1 nan where the direction does not enter it before the drained peak."""
-    from .driver import drained_biaxial, isotropic_state
-    from .probes import strain_probes
     ratios = [float(R) for R in ratios]
     alphas = [path_direction(R) for R in ratios]
     out = {R: {"alpha_eps": a, "eta": math.nan, "eps1": math.nan} for R, a in zip(ratios, alphas)}
@@ -641,7 +641,6 @@ def cone_at(params: HParams, eta: float, d_eps1: float = 1e-5, n: int = 360) -> 
     """The cone W2 <= 0 in strain directions at the first drained state with eta >= ``eta``
     (adaptive sweep, ``probes.directional_sweep``): its arcs of alpha_eps [deg] and the range of
     R = tan(alpha_eps) of the part with d eps1 > 0 > d eps2 (the proportional paths of R < 0)."""
-    from .probes import arcs, directional_sweep
     _, st = state_at_eta(params, eta, params.p0, d_eps1)
     sw = directional_sweep(st, params, n=n)
     neg = sw.w2 <= 0

@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .driver import PathResult, drained_biaxial, isotropic_state, run_path, stress_invariants
+from .driver import PathResult, drained_biaxial, isotropic_state, run_path
 from .material import HState
 from .params import HParams
 from .probes import (DEFAULT_PROBE_NORM, ProbeResult, StressProbeResult, directional_sweep,

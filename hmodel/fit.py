@@ -23,14 +23,13 @@ Functions here write nothing; ``hmodel.cli`` (``python -m hmodel fit``) writes t
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from typing import Callable, NamedTuple
 
 import numpy as np
 
-from common.io import atomic_open, read_csv, save_figure
+from common.io import read_csv, save_figure
 
 from .driver import MixedControlError
 from .experiment import biaxial_test

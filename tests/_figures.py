@@ -22,7 +22,6 @@ import itertools
 import re
 
 import numpy as np
-from matplotlib.legend import Legend
 from matplotlib.lines import Line2D
 from matplotlib.text import Text
 from matplotlib.transforms import Bbox

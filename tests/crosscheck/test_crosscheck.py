@@ -9,7 +9,6 @@ Thresholds state the physics asked for, with margins for a 300-disk sample whose
 """
 import json
 
-import numpy as np
 import pytest
 
 from crosscheck import run_crosscheck

@@ -8,7 +8,7 @@ import pytest
 
 from dem import io, kernels
 from dem.anatomy import contact_state, contact_work
-from dem.burst import BurstOptions, below_row, hold, scan_peak, wall_work
+from dem.burst import BurstOptions, below_row, hold, scan_peak
 from dem.probes import state_fingerprint
 from dem.simulation import Simulation
 from common.threads import ThreadChooser

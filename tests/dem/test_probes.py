@@ -1,7 +1,6 @@
 """Second-order work bookkeeping and the CLI end to end on a tiny sample."""
 import csv
 import math
-import os
 
 import numpy as np
 import pytest

@@ -1,6 +1,5 @@
 """The rules that decide how a stress probe ends (dem.settle), on synthetic histories and on
 a real sample before and at its peak."""
-import math
 
 import numpy as np
 import pytest

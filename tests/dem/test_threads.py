@@ -1,7 +1,6 @@
 """The thread chooser (``common.threads``, issue 10/11): with simulated chunk timings on a fake
 clock, ``auto`` keeps what is faster, and a lucky trial of the slower choice costs a bounded
 number of steps, never a whole chunk to the next rebuild."""
-import pytest
 
 import common.threads as T
 

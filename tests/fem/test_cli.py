@@ -2,7 +2,6 @@
 import subprocess
 import sys
 
-import numpy as np
 
 from fem.__main__ import main
 from fem.output import read_curve

@@ -8,8 +8,6 @@ from fem.adapter import MaterialField
 from fem.biaxial import BiaxialConfig, run_biaxial
 from fem.mesh import rectangle, from_meshio
 from fem.output import read_curve
-from fem.problem import Imperfection
-from fem.solver import LoadStepper
 
 
 @pytest.mark.parametrize("kw,name", [

@@ -12,7 +12,6 @@ mesh is closer to the finest one.
 import numpy as np
 import pytest
 
-from hmodel import HParams
 from fem.mesh import rectangle
 from fem.problem import Biaxial, Imperfection
 from fem.solver import LoadStepper

@@ -8,12 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from hmodel import HParams
 from hmodel.burst import (CPeak, Dynamics, Specimen, conjugate_stress, hold, path_direction,
                           proportional_path, run_burst, static_check)
 from hmodel.burst_rule import OUTCOMES, RELEASE, BurstRule, check_columns, decide, ke_growth
 from hmodel.cli import main
-from hmodel.driver import (MixedControl, drained_biaxial, mixed_step, proportional_strain,
+from hmodel.driver import (MixedControl, mixed_step, proportional_strain,
                            proportional_strain_stress, run_path)
 from hmodel.experiment import state_at_eta
 from hmodel.material import to_voigt

@@ -1,11 +1,8 @@
 import numpy as np
 import pytest
 
-from hmodel import HParams, update
 from hmodel.driver import (MixedControl, MixedControlError, drained_biaxial, isotropic_compression,
-                           isotropic_state, mixed_step, proportional_strain, run_path,
-                           undrained_biaxial)
-from hmodel.material import to_voigt
+                           mixed_step, proportional_strain, run_path, undrained_biaxial)
 
 
 def test_isotropic_state(params, iso_state):

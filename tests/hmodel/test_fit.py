@@ -8,7 +8,6 @@ fit uses (search 1e-4, final 5e-5); the step changes q by less than 4e-4 of its 
 import json
 import math
 import os
-import signal
 
 import numpy as np
 import pytest
@@ -17,8 +16,8 @@ import hmodel.cli as cli
 import hmodel.fit as hfit
 from hmodel import HParams
 from hmodel.experiment import biaxial_columns, biaxial_test
-from hmodel.fit import (CurveError, _covariance, _Problem, curve_check, fit_curve, jacobian,
-                        make_curve, model_curve, structural_reduction)
+from hmodel.fit import (_covariance, _Problem, curve_check, fit_curve, jacobian, make_curve,
+                        model_curve, structural_reduction)
 from common.io import read_csv, write_csv
 from tests._interrupt import interrupt_after
 from tests.hmodel.test_bad_input import _refused

@@ -7,10 +7,8 @@ still catch a missing term (the smallest physical terms, the volume change, are 
 The patterns at +h and -h are checked to be the same (else the FD would straddle a switch).
 """
 import numpy as np
-import pytest
 
 from hmodel import broadcast_state, update, update_full
-from hmodel.driver import drained_biaxial, run_path
 from hmodel.material import to_voigt
 
 H = 1e-11

@@ -192,7 +192,9 @@ def parse_ratios(text):
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _burst_options(a, n_disks=None):
+def _burst_options(a):
+    """BurstOptions of the command line, its ranges checked (``BurstOptions.validate``), before
+    the states load; the rule of the sample's size: ``_burst_size``."""
     from .burst import BurstOptions
     try:
         return BurstOptions(rate=a.rate, path_strain=a.path_strain, peak_drop=a.peak_drop,
@@ -204,7 +206,18 @@ def _burst_options(a, n_disks=None):
                             relax_max_steps=a.relax_max_steps, stairs=a.stairs,
                             max_holds=a.max_holds, probes=not a.no_probes,
                             probe_d_eps1=a.probe_d_eps1,
-                            probe_rate=a.probe_rate).validate(n_disks)
+                            probe_rate=a.probe_rate).validate()
+    except ValueError as e:       # name the option as the command line spells it
+        raise opt.record_error(e, "BurstOptions") from None
+
+
+def _burst_size(a, opts):
+    """The rule of the sample's size (``BurstOptions.check_size``) at the disk count of the
+    states of --biaxial, read from its summary.json before any state loads
+    (``dem.burst.check_sample_size``, as ``run_burst`` checks it)."""
+    from .burst import check_sample_size
+    try:
+        check_sample_size(a.biaxial, opts)
     except ValueError as e:       # name the option as the command line spells it
         raise opt.record_error(e, "BurstOptions") from None
 
@@ -583,9 +596,11 @@ def main(argv=None):
             opt.check_folder(a.biaxial, "--biaxial", BIAXIAL_FOLDER, ("python -m dem biaxial",))
         if a.cmd == "burst":
             from .burst import load_starts
-            _burst_options(a)         # bad options and input files before the compilation
-            starts, _, own = load_starts(a.biaxial, a.start_fractions, a.params)
-            a.burst_options = _burst_options(a, own.n)
+            # bad options and input files before the compilation: the options' ranges, then the
+            # rule of the sample's size (its disk count read cheaply), both before the states load
+            a.burst_options = _burst_options(a)
+            _burst_size(a, a.burst_options)
+            starts, _, _ = load_starts(a.biaxial, a.start_fractions, a.params)
             if a.resume:              # a folder of other states is refused before the kernels
                 from .burst import checkpoint_header, read_checkpoint
                 read_checkpoint(a.out, checkpoint_header(starts, a.ratios, a.burst_options))

@@ -7,11 +7,12 @@ FILE with the options on top, docs/parameters.md) are the H-model's: ``hmodel.pa
 The vocabulary (``VOCABULARY``, issue 32) is written once: every option of the three parts, by
 name, with the quantity it is (in the paper's symbols), its unit, its kind and the range the
 parser checks, the record fields that check it where a command binds it to its record
-(``HParams``, ``DemParams``, ``BurstOptions``, ``ProbeOptions``, ``BiaxialConfig``,
-``BurstConfig``, ``Specimen``, ``Dynamics``: their validation gives the range, once; the
-command names the option with ``record_error``), and its former names (refused with "did you
-mean" the new one). The parsers are built from it (``add``), so that every help says what the
-value is, its unit and its default.
+(``HParams``, ``DemParams``, ``BurstOptions``, ``ProbeOptions``, ``CalibrationOptions``,
+``BiaxialConfig``, ``BurstConfig``, ``Specimen``, ``Dynamics``: their validation gives the range,
+once, and the library's entry point calls the same validation; the command names the option with
+``record_error``), and its former names (refused with "did you mean" the new one). The parsers
+are built from it (``add``), so that every help says what the value is, its unit and its
+default.
 
 The rule of --out: required by every command that writes (a folder; the file of ``params``):
 a newcomer sees where a run goes, and no two commands share a default folder. The folder
@@ -297,9 +298,10 @@ VOCABULARY = {t.name: t for t in (
        "> 0)", "-", fields=("DemParams.rolling_stiffness",)),
     # -- the loading ---------------------------------------------------------------------------
     _T("--sigma2", "confining (lateral) stress sigma2, the isotropic start's p0", "Pa", "real",
-       0, 1e9, hi_open=False, fields=("HParams.p0",), old=(("--confining", ()),)),
+       0, 1e9, hi_open=False, fields=("HParams.p0", "CalibrationOptions.confining"),
+       old=(("--confining", ()),)),
     _T("--eps1-max", "axial strain eps1 where the drained test ends", "-", "real", 0, 0.5,
-       fields=("BiaxialConfig.eps1_max",), old=(("--eps-max", ()),)),
+       fields=("BiaxialConfig.eps1_max", "CalibrationOptions.eps_max"), old=(("--eps-max", ()),)),
     _T("--d-eps1", "axial strain step of the drained path", "-", "real", 0, 0.05,
        fields=("BiaxialConfig.d_eps1",)),
     _T("--d-eps1-search", "axial strain step of the drained path during the search", "-",
@@ -307,7 +309,7 @@ VOCABULARY = {t.name: t for t in (
     _T("--eta-a", "stress ratio eta = q/p of point A (p = (s1 + s2)/2)", "-", "real", 0, 2,
        old=(("--eta", ()),)),
     _T("--rate", "axial strain rate", "1/s", "real", 0, 10, hi_open=False,
-       fields=("BurstOptions.rate",)),
+       fields=("BurstOptions.rate", "CalibrationOptions.rate")),
     _T("--compaction-phi-g", "grain friction angle phi_g during the compaction", "deg", "real",
        0, 90, lo_open=False, old=(("--compaction-friction", ()),)),
     _T("--save-fractions", "comma-separated fractions of the drained peak eta: the first state "
@@ -316,10 +318,10 @@ VOCABULARY = {t.name: t for t in (
     _T("--save-etas", "comma-separated eta: the first state at each is saved too", "-", "reals",
        0, 2),
     _T("--no-vtk", "no VTK files of the particles", None, "flag"),
-    _T("--post-peak-strain", "a test stops this axial strain after its peak", "-", "real", 0,
-       0.5),
+    _T("--post-peak-strain", "a test stops this axial strain after its peak", "-", "real",
+       fields=("CalibrationOptions.post_peak_strain",)),
     _T("--smooth", "axial strain window of the moving average of q for the peak (0: raw)", "-",
-       "real", 0, 0.05, lo_open=False),
+       "real", fields=("CalibrationOptions.smooth",)),
     # -- directional analyses --------------------------------------------------------------------
     _T("--n-probes", "number of strain probes (directions), uniform before any refinement", "-",
        "int", 8, None, False, old=(("--n", ("hmodel probes", "hmodel domain")),)),
@@ -456,10 +458,11 @@ VOCABULARY = {t.name: t for t in (
     _T("--check-seeds", "comma-separated samples (seeds) the best set is then run on, not among "
        "--seeds; the check's verdict is their mean", None, "text"),
     _T("--initial", "sets of the space-filling (Sobol) design before the model proposes any (at "
-       "least the varied parameters + 2)", "-", "int", 3, 4096, False, False),
-    _T("--batch", "sets the model proposes per round", "-", "int", 1, 64, False, False),
+       "least the varied parameters + 2)", "-", "int", fields=("CalibrationOptions.initial",)),
+    _T("--batch", "sets the model proposes per round", "-", "int",
+       fields=("CalibrationOptions.batch",)),
     _T("--max-evals", "parameter sets at most, the start set included, each run on every seed "
-       "(may be raised on --resume)", "-", "int", 1, 100_000, False, False),
+       "(may be raised on --resume)", "-", "int", fields=("CalibrationOptions.max_evals",)),
     _T("--full", "the paper's 12,000 disks at 0.01/s (see README for the time)", None, "flag"),
     _T("--no-dem", "H-model and FE only", None, "flag", old=(("--skip-dem", ()),)),
     _T("--no-domain", "no H-model bifurcation domain", None, "flag"),
@@ -509,14 +512,18 @@ def _default_text(term, default):
     return str(default)
 
 
-def add(ap, name, default=None, *, note="", record=None, default_text=None, required=False,
-        many=False, parse=None, choices=None, dest=None, metavar=None, flag_value=True):
+def add(ap, name, default=None, *, note="", record=None, allowed=None, default_text=None,
+        required=False, many=False, parse=None, choices=None, dest=None, metavar=None,
+        flag_value=True):
     """Add the vocabulary's option ``name`` to the parser (or group) ``ap``, its help written
     from the term: what it is, [unit], the range the parser checks, the default (``default``,
     or ``default_text`` where the default is worked out later; required: "required").
     ``record``: the record whose validation checks the value (a field of it is among the term's
     ``fields``): the parser checks only the type, the command validates the record before any
-    computation and names the option with ``record_error`` / ``param_option_error``.
+    computation and names the option with ``record_error`` / ``param_option_error``;
+    ``allowed``: the record's range as the help says it ("0 < value <= 10", from the record's
+    own table, e.g. dem.calibrate's ``CalibrationOptions.allowed_text``), where the parser checks
+    none.
     ``note``: what the value does in this command, after the term's text; ``many``: a
     comma-separated list of the term's kind; ``parse``: the text's parser (kind "text", or a
     list of checked values). ``flag_value``: False for a "--no-x" flag stored in ``dest``
@@ -549,6 +556,8 @@ def add(ap, name, default=None, *, note="", record=None, default_text=None, requ
     text = t.help + (f" [{t.unit}]" if t.unit else "") + (f"; {note}" if note else "")
     if ranged:
         text += f"; allowed {t.range_text()}"
+    elif allowed and record is not None:
+        text += f"; allowed {allowed}"
     if choices:
         text += f"; one of {', '.join(choices)}"
     if required:

@@ -192,7 +192,9 @@ def parse_ratios(text):
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _burst_options(a, n_disks=None):
+def _burst_options(a):
+    """BurstOptions of the command line, its ranges checked (``BurstOptions.validate``), before
+    the states load; the rule of the sample's size: ``_burst_size``."""
     from .burst import BurstOptions
     try:
         return BurstOptions(rate=a.rate, path_strain=a.path_strain, peak_drop=a.peak_drop,
@@ -204,7 +206,18 @@ def _burst_options(a, n_disks=None):
                             relax_max_steps=a.relax_max_steps, stairs=a.stairs,
                             max_holds=a.max_holds, probes=not a.no_probes,
                             probe_d_eps1=a.probe_d_eps1,
-                            probe_rate=a.probe_rate).validate(n_disks)
+                            probe_rate=a.probe_rate).validate()
+    except ValueError as e:       # name the option as the command line spells it
+        raise opt.record_error(e, "BurstOptions") from None
+
+
+def _burst_size(a, opts):
+    """The rule of the sample's size (``BurstOptions.check_size``) at the disk count of the
+    states of --biaxial, read from its summary.json before any state loads
+    (``dem.burst.check_sample_size``, as ``run_burst`` checks it)."""
+    from .burst import check_sample_size
+    try:
+        check_sample_size(a.biaxial, opts)
     except ValueError as e:       # name the option as the command line spells it
         raise opt.record_error(e, "BurstOptions") from None
 
@@ -256,17 +269,26 @@ def cmd_bench(a):
     print(f"particle-steps/s: {res['particle_steps_per_s_auto']:.4g}")
 
 
-def cmd_calibrate(a):
-    from .calibrate import run_calibration
+def _calibration_options(a):
+    """The calibration's options of the command line (``CalibrationOptions``), validated with
+    the start set by the rule ``run_calibration`` applies too, before anything is computed or
+    written: an OptionError of one line naming the option otherwise."""
+    from .calibrate import CalibrationOptions
     if a.n is None and a.params is None:
         a.n = 2000                       # calibrate's default sample (see its --help)
+    return CalibrationOptions(target=a.target, vary=a.vary, bounds=a.bounds, seeds=a.seeds,
+                              check_seeds=a.check_seeds, initial=a.initial, batch=a.batch,
+                              max_evals=a.max_evals, rate=a.rate, confining=a.sigma2,
+                              eps_max=a.eps1_max, post_peak_strain=a.post_peak_strain,
+                              smooth=a.smooth).validate(_params(a))
+
+
+def cmd_calibrate(a):
+    from .calibrate import run_calibration
+    options = getattr(a, "calibration", None) or _calibration_options(a)
     t0 = time.time()
-    s = run_calibration(a.out, _params(a), a.vary, bounds=a.bounds, target=a.target,
-                        seeds=a.seeds, check_seeds=a.check_seeds, initial=a.initial,
-                        batch=a.batch, max_evals=a.max_evals, rate=a.rate,
-                        confining=a.sigma2, eps_max=a.eps1_max,
-                        post_peak_strain=a.post_peak_strain, smooth=a.smooth,
-                        workers=a.workers, scheduler=a.scheduler, resume=a.resume,
+    s = run_calibration(a.out, _params(a), options=options, workers=a.workers,
+                        scheduler=a.scheduler, resume=a.resume,
                         stage=getattr(a, "stage", None), params_note=a.params_note,
                         verbose=not a.quiet)
     print(a.params_note)
@@ -431,7 +453,7 @@ def build_parser() -> opt.Parser:
     add(c, "--busy-core")
     c.set_defaults(func=cmd_bench)
 
-    from .calibrate import DEFAULT_VARY, TARGETS, bounds_type, seeds_type, vary_type
+    from .calibrate import CalibrationOptions, TARGETS, bounds_type, seeds_type, vary_type
     k = sub.add_parser("calibrate", help="fit DEM parameters to the H-model's drained biaxial "
                                          "test (peak q, eps1 at 95 %% of it, secant modulus, "
                                          "dilatancy ratio)",
@@ -448,24 +470,29 @@ def build_parser() -> opt.Parser:
                                    "them. See docs/dem.md.")
     opt.add_out(k)
     add_param_options(k, n_text="the file's, else 2000")
+    # the search's and each test's options: checked by CalibrationOptions (its one table of
+    # ranges, and the rules between two values), as run_calibration checks them; its defaults
+    CO, D = "CalibrationOptions", CalibrationOptions()
+    ranged = lambda g, option, field, **kw: add(g, option, getattr(D, field), record=CO,
+                                                allowed=CalibrationOptions.allowed_text(field),
+                                                **kw)
     g = k.add_argument_group("the fit")
-    add(g, "--target", "hmodel", choices=TARGETS, note="the H-model's, Table I, at --sigma2")
-    add(g, "--vary", DEFAULT_VARY, parse=vary_type)
+    add(g, "--target", D.target, choices=TARGETS, note="the H-model's, Table I, at --sigma2")
+    add(g, "--vary", D.vary, parse=vary_type)
     add(g, "--bounds", parse=bounds_type, default_text="kn_over_d 2e9:32e9 log, phi_g 10:50, "
         "kt_over_kn 0.2:1, rolling_friction 0:0.3, rolling_stiffness 0.25:4 log; others 0.5-2 x "
         "the start value")
-    add(g, "--seeds", (1, 2, 3, 4), parse=seeds_type)
-    add(g, "--check-seeds", (5, 6, 7, 8), parse=seeds_type)
-    add(g, "--initial", 16)
-    add(g, "--batch", 1)
-    add(g, "--max-evals", 32)
+    add(g, "--seeds", D.seeds, parse=seeds_type)
+    add(g, "--check-seeds", D.check_seeds, parse=seeds_type)
+    ranged(g, "--initial", "initial")
+    ranged(g, "--batch", "batch")
+    ranged(g, "--max-evals", "max_evals")
     g = k.add_argument_group("each test")
-    add(g, "--rate", 0.01)
-    add(g, "--sigma2", 200e3)
-    add(g, "--eps1-max", 0.035, note="at least 0.005; also ends --post-peak-strain after the "
-        "peak")
-    add(g, "--post-peak-strain", 0.01, note="with q below 0.98 of it")
-    add(g, "--smooth", 0.001)
+    ranged(g, "--rate", "rate")
+    ranged(g, "--sigma2", "confining")
+    ranged(g, "--eps1-max", "eps_max", note="also ends --post-peak-strain after the peak")
+    ranged(g, "--post-peak-strain", "post_peak_strain", note="with q below 0.98 of it")
+    ranged(g, "--smooth", "smooth")
     g = k.add_argument_group("the run")
     add(g, "--workers", default_text="the cores", note="each evaluation runs on one thread")
     add(g, "--scheduler", default_text="none (local processes)")
@@ -555,6 +582,8 @@ def main(argv=None):
             _directions(a)            # bad input before the compilation
         if a.cmd in ("probes", "domain"):
             _probe_options(a)
+        if a.cmd == "calibrate":
+            a.calibration = _calibration_options(a)     # before the compilation, as every check
         if getattr(a, "damping", None) is not None and a.cmd == "probes":
             from .params import DemParams
             try:
@@ -567,9 +596,11 @@ def main(argv=None):
             opt.check_folder(a.biaxial, "--biaxial", BIAXIAL_FOLDER, ("python -m dem biaxial",))
         if a.cmd == "burst":
             from .burst import load_starts
-            _burst_options(a)         # bad options and input files before the compilation
-            starts, _, own = load_starts(a.biaxial, a.start_fractions, a.params)
-            a.burst_options = _burst_options(a, own.n)
+            # bad options and input files before the compilation: the options' ranges, then the
+            # rule of the sample's size (its disk count read cheaply), both before the states load
+            a.burst_options = _burst_options(a)
+            _burst_size(a, a.burst_options)
+            starts, _, _ = load_starts(a.biaxial, a.start_fractions, a.params)
             if a.resume:              # a folder of other states is refused before the kernels
                 from .burst import checkpoint_header, read_checkpoint
                 read_checkpoint(a.out, checkpoint_header(starts, a.ratios, a.burst_options))

@@ -53,7 +53,7 @@ Modules: ``options`` (``BurstOptions`` and the peak rule), ``runs`` (the path, t
 fixed strain, the kinematic probe of the path, the held run), ``stairs`` (the staircase: the c
 peak at rest, the below and past runs), ``journal`` (a staircase's journal and the command's
 checkpoint), ``theory`` (k_path's noise and the theory's verdict), ``report`` (the rows and
-files), ``figures``, ``command`` (``load_starts``, ``run_burst``).
+files), ``figures``, ``command`` (``check_sample_size``, ``load_starts``, ``run_burst``).
 """
 from .options import BurstOptions, HOLDS, SWITCHES, below_row, confirm_peak, scan_peak
 from .runs import (H, HISTORY_COLUMNS, HOLD_ANATOMY_COLUMNS, HOLD_LEDGER_COLUMNS, HoldResult, ONSET,
@@ -66,10 +66,11 @@ from .stairs import StairResult, staircase
 from .figures import OUTCOME_COLOR, plot_burst, plot_k_path
 from .report import (BURST_COLUMNS, PROBE_COLUMNS, REST_COLUMNS, STAIR_COLUMNS, burst_row,
                      write_burst_files)
-from .command import check_ratio, load_starts, run_burst  # check_ratio: dem.__main__'s --ratios
+# check_ratio: dem.__main__'s --ratios
+from .command import check_ratio, check_sample_size, load_starts, run_burst
 
 __all__ = ["below_row", "BURST_COLUMNS", "burst_row", "BurstOptions", "check_ratio",
-           "checkpoint_header", "CLEARLY", "confirm_peak", "growth", "H", "HISTORY_COLUMNS",
+           "check_sample_size", "checkpoint_header", "CLEARLY", "confirm_peak", "growth", "H", "HISTORY_COLUMNS",
            "hold", "HOLD_ANATOMY_COLUMNS", "HOLD_LEDGER_COLUMNS", "HoldResult", "HOLDS", "k_noise",
            "ke_growth", "load_starts", "ONSET", "OUTCOME_COLOR", "PATH_COLUMNS",
            "PATH_LEDGER_COLUMNS", "path_probe", "PathResult", "plot_burst", "plot_k_path",

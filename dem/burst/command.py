@@ -1,7 +1,7 @@
 """The burst's command (``dem.burst``, ``python -m dem burst``): the start states
-(``load_starts``), every path then every path's staircase spread over processes or a dask cluster
-(``run_burst``), the checkpoint and journals of a resume, the files, the figures and the anatomy
-of the switches' runs."""
+(``load_starts``; their disk count read first, ``check_sample_size``), every path then every
+path's staircase spread over processes or a dask cluster (``run_burst``), the checkpoint and
+journals of a resume, the files, the figures and the anatomy of the switches' runs."""
 from __future__ import annotations
 
 import json
@@ -26,6 +26,29 @@ from .stairs import staircase
 # ----------------------------------------------------------------------------------------------
 # The command: every (R, f) path, then every switch, spread over processes; files and figures
 # ----------------------------------------------------------------------------------------------
+def _summary_params(biaxial_dir):
+    """The parameters of the biaxial test of ``biaxial_dir`` (its summary.json: those of every
+    state ``load_starts`` takes), or None if it has no readable summary.json."""
+    from ..params import DemParams
+    try:
+        with open(os.path.join(biaxial_dir, "summary.json")) as fh:
+            return DemParams.from_dict(json.load(fh).get("params", {}))
+    except (OSError, ValueError, TypeError, AttributeError):
+        return None
+
+
+def check_sample_size(biaxial_dir, opts: BurstOptions):
+    """``opts.check_size`` (the rule of the sample's size) at the disk count of the states of
+    ``biaxial_dir``, read cheaply before any state is loaded (its summary.json's parameters, to
+    which ``load_starts`` holds every state); returns that count, or None (nothing checked) if
+    it has no readable summary.json (``load_starts`` then refuses the folder in one line)."""
+    own = _summary_params(biaxial_dir)
+    if own is None:
+        return None
+    opts.check_size(own.n)
+    return own.n
+
+
 def load_starts(biaxial_dir, fractions, params_file=None):
     """[(f, State, meta)] of ``biaxial_dir/states/state_fF.FFF.npz`` for each start fraction,
     the drained peak eta (``summary.json``) and the states' parameters. ValueError (one line,
@@ -93,8 +116,11 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     from common.io import atomic_write_bytes
     from ..probes import _map
     ratios = [check_ratio(float(r)) for r in ratios]
+    # the options by the command line's rule: their ranges, then the rule of the sample's size,
+    # both before the states load
+    opts.validate()
+    check_sample_size(biaxial_dir, opts)
     starts, eta_peak, params = load_starts(biaxial_dir, fractions, params_file)
-    opts.validate(params.n)
     header = checkpoint_header(starts, ratios, opts)
     done = read_checkpoint(out_dir, header) if resume else []   # refused before any write
     t0 = time.time()

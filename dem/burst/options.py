@@ -1,5 +1,7 @@
 """The burst's options (``dem.burst``): ``BurstOptions``, the path, the switches and the rule of
-the runs, each value checked once where the record is defined (``BurstOptions.validate``); and
+the runs, each value checked once where the record is defined (``BurstOptions.validate``: its ranges,
+before the states load; ``BurstOptions.check_size``: the rule of the sample's size, once it is
+known, before the states load too; ``run_burst`` calls both, as the command line does); and
 the rule of the loaded peak along the path (``confirm_peak``, ``scan_peak``) and of the below
 switch (``below_row``)."""
 from __future__ import annotations
@@ -47,9 +49,12 @@ class BurstOptions(NamedTuple):
                                      # one equilibrium window (``probe_rate_of``)
 
     def validate(self, n_disks=None) -> "BurstOptions":
-        """ValueError naming the option and its range for a bad value; ``n_disks``: the
-        sample's size, for the relaxation cap against the equilibrium window."""
+        """ValueError naming the option and its range for a bad value (the table below, and
+        ``dem.settle``'s rule); ``n_disks``: the sample's size, for the rule that depends on it
+        too (``check_size``; None: that rule is left to a later ``check_size``, once the size is
+        known)."""
         from ..settle import window_steps
+        self.rule().validate()            # the equilibrium's (window, check_every: used below)
         checks = (("rate", 0 < self.rate <= 10, "0 < rate <= 10 [1/s]"),
                   ("path_strain", 0 < self.path_strain < 0.5, "0 < path_strain < 0.5"),
                   ("record_strain", 0 < self.record_strain < self.path_strain,
@@ -63,7 +68,14 @@ class BurstOptions(NamedTuple):
                    "wall_period_steps >= 20 (the leapfrog resolves the walls' period)"),
                   ("stairs", self.stairs >= 1, "stairs >= 1"),
                   ("max_holds", self.max_holds >= 2, "max_holds >= 2"),
-                  ("probe_d_eps1", 0 < self.probe_d_eps1 <= 1e-3, "0 < probe_d_eps1 <= 1e-3"))
+                  ("probe_d_eps1", 0 < self.probe_d_eps1 <= 1e-3, "0 < probe_d_eps1 <= 1e-3"),
+                  # two equilibrium windows of any sample: its window is a whole number of
+                  # checks, one at least (the sample's own two: check_size)
+                  ("relax_max_steps", self.relax_max_steps >= 2 * self.check_every,
+                   "relax_max_steps >= two equilibrium windows of the sample, each window x "
+                   "sqrt(n_disks / 1000) in whole checks of check_every steps "
+                   f"({2 * self.check_every} at least, {2 * window_steps(1000, self.rule())} at "
+                   "1000 disks)"))
         for name, ok, rng in checks:
             val = getattr(self, name)
             if not ok or not math.isfinite(val):
@@ -78,13 +90,21 @@ class BurstOptions(NamedTuple):
                                                and self.wall_mass > 0):
             raise ValueError(f"wall_mass={self.wall_mass!r}; allowed range: wall_mass > 0 [kg] "
                              "(finite), or the rule (wall_period_steps)")
-        win = window_steps(n_disks or 1000, self.rule())
+        if n_disks is not None:
+            self.check_size(n_disks)
+        return self
+
+    def check_size(self, n_disks) -> "BurstOptions":
+        """The rule of the sample's size, once it is known (``validate`` checks the rest):
+        ValueError naming the option if a relaxation's cap is less than two equilibrium windows
+        of ``n_disks`` disks (``dem.settle.window_steps``)."""
+        from ..settle import window_steps
+        win = window_steps(n_disks, self.rule())
         if not self.relax_max_steps >= 2 * win:
             raise ValueError(f"relax_max_steps={self.relax_max_steps!r}; allowed range: "
                              f"relax_max_steps >= {2 * win} (two equilibrium windows at "
-                             f"{n_disks or 1000} disks: a relaxation is decided over a window of "
-                             "its c's drift, itself a window long)")
-        self.rule().validate()
+                             f"{n_disks} disks: a relaxation is decided over a window of its "
+                             "c's drift, itself a window long)")
         return self
 
     def rule(self) -> SettleRule:

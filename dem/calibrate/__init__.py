@@ -53,8 +53,13 @@ its run_biaxial checkpoint in DIR/work/<key>/.  A folder made with other options
 one made with the three targets of before the dilatancy is read with four (its curves hold eps_v;
 one line says so).
 
+Options: ``CalibrationOptions`` (``options``), the search's and each test's, validated once by one
+rule (a table of ranges, ``RANGES``, and the rules between two values) by the command line before
+anything runs and by ``run_calibration`` (a record, or its keywords).
+
 Modules: ``targets`` (the four figures of a curve, their tolerances, the H-model's curve),
-``cli`` (the command line's --vary, --bounds and --seeds), ``search`` (the search space, the
+``cli`` (the command line's --vary, --bounds and --seeds), ``options`` (``CalibrationOptions``),
+``search`` (the search space, the
 model of the figures and the search: pure numerics, no DEM run), ``evaluation`` (one DEM run in a
 worker, a set's record from its seeds, the checkpoint), ``report`` (the CSVs, the verdict,
 report.md), ``figures``, ``command`` (``run_calibration``).
@@ -62,11 +67,13 @@ report.md), ``figures``, ``command`` (``run_calibration``).
 from .targets import (DILATANCY_STRAIN, FIGURE_TEXT, HMODEL_EPS_MIN, PEAK_FRACTION,
                       SECANT_STRAIN, TARGETS, TOLERANCES, compare, curve_figures,
                       dilatancy_ratio, hmodel_curve, rank, smoothed)
-from .cli import (DEFAULT_VARY, NUMERICAL, bounds_type, calibratable_fields, parse_seeds,
-                  parse_vary, resolve_field, seeds_type, vary_type)
+from .cli import (DEFAULT_VARY, NUMERICAL, bounds_type, calibratable_fields, parse_bounds,
+                  parse_seeds, parse_vary, resolve_field, seeds_type, vary_type)
 from .search import (DEFAULT_BOUNDS, DENSE_POINTS, FigureModel, LOG_FIELDS, MARGIN_SIGMAS,
                      MIN_DISTANCE, SMOOTHINGS, Space, analyse, dense_points, identifiability,
-                     initial_design, make_space, nearest_distance, space_dim_min, surrogate_search)
+                     initial_design, make_space, model_sets_min, nearest_distance, space_dim_min,
+                     surrogate_search)
+from .options import CalibrationOptions, RANGES
 from .evaluation import (FORMAT, FORMAT_VERSION, RESUME_FREE, current_params, params_key,
                          read_checkpoint)
 from .evaluation import _header  # noqa: F401 (the checkpoint's header, which tests build)
@@ -74,12 +81,14 @@ from .report import CSV_FIXED, FIGURE_COLS, RUN_FIXED
 from .figures import SEED_COLORS, START_SHADES, redraw_figures
 from .command import run_calibration
 
-__all__ = ["analyse", "bounds_type", "calibratable_fields", "compare", "CSV_FIXED",
+__all__ = ["analyse", "bounds_type", "CalibrationOptions", "calibratable_fields", "compare",
+           "CSV_FIXED",
            "current_params", "curve_figures", "DEFAULT_BOUNDS", "DILATANCY_STRAIN", "dilatancy_ratio", "DEFAULT_VARY", "DENSE_POINTS",
            "dense_points", "FIGURE_COLS", "FIGURE_TEXT", "FigureModel", "FORMAT", "FORMAT_VERSION", "hmodel_curve",
            "HMODEL_EPS_MIN", "identifiability", "initial_design", "LOG_FIELDS", "make_space",
-           "MARGIN_SIGMAS", "MIN_DISTANCE", "nearest_distance", "NUMERICAL", "params_key",
-           "parse_seeds", "parse_vary", "PEAK_FRACTION", "rank", "read_checkpoint",
+           "MARGIN_SIGMAS", "MIN_DISTANCE", "model_sets_min", "nearest_distance", "NUMERICAL",
+           "params_key", "parse_bounds", "parse_seeds", "parse_vary", "PEAK_FRACTION", "RANGES",
+           "rank", "read_checkpoint",
            "redraw_figures", "resolve_field", "RESUME_FREE", "run_calibration", "RUN_FIXED",
            "SECANT_STRAIN", "SEED_COLORS", "seeds_type", "smoothed", "SMOOTHINGS", "Space",
            "space_dim_min", "START_SHADES", "surrogate_search", "TARGETS", "TOLERANCES",

@@ -76,26 +76,43 @@ def vary_type(text):
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def parse_bounds(value):
+    """{field: (lo, hi)} of --bounds: text NAME=LO:HI[,NAME=LO:HI...] or a mapping {name: (lo,
+    hi)} (names as --vary takes them); ValueError without the option prefix (``bounds_type``
+    adds it through argparse, ``CalibrationOptions`` itself): the one rule of both."""
+    if isinstance(value, str):
+        items = []
+        for item in [s.strip() for s in value.split(",") if s.strip()]:
+            try:
+                name, rng = item.split("=")
+                lo, hi = (float(v) for v in rng.split(":"))
+            except ValueError:
+                raise ValueError(f"{item!r}: allowed NAME=LO:HI, e.g. kn_over_d=2e9:32e9") from None
+            items.append((name.strip(), lo, hi, item))
+        if not items:
+            raise ValueError(f"{value!r}: allowed NAME=LO:HI[,NAME=LO:HI...]")
+    else:
+        try:
+            items = [(str(k), float(lo), float(hi), f"{k}={lo}:{hi}")
+                     for k, (lo, hi) in dict(value).items()]
+        except (TypeError, ValueError):
+            raise ValueError(f"{value!r}: allowed {{NAME: (LO, HI)}}, e.g. "
+                             "{'kn_over_d': (2e9, 32e9)}") from None
+    out = {}
+    for name, lo, hi, item in items:
+        f = resolve_field(name)
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"{item}: allowed finite LO < HI")
+        out[f] = (lo, hi)
+    return out
+
+
 def bounds_type(text):
     """argparse type of --bounds NAME=LO:HI[,NAME=LO:HI...] -> {field: (lo, hi)}."""
-    out = {}
-    for item in [s.strip() for s in text.split(",") if s.strip()]:
-        try:
-            name, rng = item.split("=")
-            lo, hi = (float(v) for v in rng.split(":"))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{item!r}: allowed NAME=LO:HI, e.g. "
-                                             "kn_over_d=2e9:32e9") from None
-        try:
-            f = resolve_field(name.strip())
-        except ValueError as e:
-            raise argparse.ArgumentTypeError(str(e)) from None
-        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            raise argparse.ArgumentTypeError(f"{item}: allowed finite LO < HI")
-        out[f] = (lo, hi)
-    if not out:
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed NAME=LO:HI[,NAME=LO:HI...]")
-    return out
+    try:
+        return parse_bounds(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def parse_seeds(text):

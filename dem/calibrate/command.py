@@ -1,5 +1,5 @@
 """The calibration's command (``dem.calibrate``, ``python -m dem calibrate``):
-``run_calibration`` checks its options, drives the search over batches of DEM runs spread over
+``run_calibration`` checks its options (``CalibrationOptions``), drives the search over batches of DEM runs spread over
 processes or a dask cluster, takes the runs of the checkpoint on a resume, and writes the files,
 the figures and the summary."""
 from __future__ import annotations
@@ -16,14 +16,14 @@ import numpy as np
 from common.io import atomic_write_bytes
 
 from ..params import DemParams, record_params, save_params
-from .cli import parse_seeds, resolve_field
 from .evaluation import (_check_mean, _combine, _evaluate_task, _header, _log, _past_peak,
                          _sample_scatter, params_key, read_checkpoint)
+from .options import CalibrationOptions
 from .figures import _figure, _score_figure, _search_figure
 from .report import FIGURE_COLS, _report, _spread, _verdict, _write_csv, _write_runs_csv
 from .search import (FigureModel, dense_points, identifiability, make_space, space_dim_min,
                      surrogate_search)
-from .targets import (DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TARGETS, TOLERANCES,
+from .targets import (DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TOLERANCES,
                       _fmt_figs, _fmt_values, compare, curve_figures, hmodel_curve)
 
 
@@ -32,13 +32,22 @@ def _say(verbose, msg):
         print(msg, file=sys.stderr, flush=True)
 
 
-def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel",
-                    seeds=(1, 2, 3, 4), check_seeds=(5, 6, 7, 8), initial=16, batch=1, max_evals=32,
-                    rate=0.01, confining=200e3, eps_max=0.035, post_peak_strain=0.01,
-                    smooth=0.001, workers=None, scheduler=None, resume=False, verbose=True,
-                    task=None, stage=None, params_note=None):
+_D = CalibrationOptions()        # the defaults of the keywords: the record's
+
+
+def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, target=_D.target,
+                    seeds=_D.seeds, check_seeds=_D.check_seeds, initial=_D.initial,
+                    batch=_D.batch, max_evals=_D.max_evals, rate=_D.rate,
+                    confining=_D.confining, eps_max=_D.eps_max,
+                    post_peak_strain=_D.post_peak_strain, smooth=_D.smooth, workers=None,
+                    scheduler=None, resume=False, verbose=True, task=None, stage=None,
+                    params_note=None, options: CalibrationOptions | None = None):
     """Fit the fields ``vary`` of ``base`` (the start set) to the target's drained biaxial test
     (module docstring), every set on each of ``seeds``, the best one then on ``check_seeds``.
+    The options of the search and of each test (``vary`` to ``smooth``; ``vary`` None: the
+    default --vary) may be given as keywords or as one ``options`` record
+    (``CalibrationOptions``), not both; either way ``CalibrationOptions.validate`` checks them
+    first (the command line's rule: ValueError of one line naming the option, nothing written).
     Writes out_dir/evaluations.jsonl (checkpoint), calibration.csv (a row per set),
     calibration_runs.csv (a row per run), params.json (a parameter file: the start set
     ``base``; ``params_note`` says where it came from), calibrated.json (the best set, with the
@@ -48,29 +57,22 @@ def run_calibration(out_dir, base: DemParams, vary, bounds=None, target="hmodel"
     ``_evaluate_task``; tests pass a cheap one).  ``stage``: an ``common.options.Stage`` told
     where the run is and what it has written (for the line of an interrupted command)."""
     t0 = time.time()
-    if target not in TARGETS:
-        raise ValueError(f"--target {target!r}; allowed: {', '.join(TARGETS)}")
-    vary = tuple(resolve_field(v) for v in vary)
-    seeds = parse_seeds(",".join(map(str, seeds)) if not isinstance(seeds, str) else seeds)
-    check_seeds = (parse_seeds(",".join(map(str, check_seeds))) if check_seeds else ())
-    d_min = len(vary) + 2
-    for name, val, ok, rng in (
-            ("--initial", initial, isinstance(initial, int) and d_min <= initial <= 4096,
-             f"an integer in [{d_min}, 4096] (number of varied parameters + 2 at least)"),
-            ("--batch", batch, isinstance(batch, int) and 1 <= batch <= 64, "an integer in [1, 64]"),
-            ("--max-evals", max_evals, isinstance(max_evals, int) and max_evals >= 1,
-             "an integer >= 1"),
-            ("--check-seeds", check_seeds, not set(check_seeds) & set(seeds),
-             "seeds not in --seeds (a check on a seed the fit did not see)"),
-            ("--rate", rate, rate > 0, "value > 0 [1/s]"),
-            ("--sigma2", confining, confining > 0, "value > 0 [Pa]"),
-            ("--eps1-max", eps_max, 2 * SECANT_STRAIN <= eps_max < 0.5,
-             f"{2 * SECANT_STRAIN:g} <= value < 0.5"),
-            ("--post-peak-strain", post_peak_strain, 0 < post_peak_strain < eps_max,
-             "0 < value < --eps1-max"),
-            ("--smooth", smooth, 0 <= smooth < 0.05, "0 <= value < 0.05")):
-        if not ok or (isinstance(val, float) and not math.isfinite(val)):
-            raise ValueError(f"{name} {val!r}: allowed {rng}")
+    keywords = dict(bounds=bounds, target=target, seeds=seeds, check_seeds=check_seeds,
+                    initial=initial, batch=batch, max_evals=max_evals, rate=rate,
+                    confining=confining, eps_max=eps_max, post_peak_strain=post_peak_strain,
+                    smooth=smooth)
+    if options is None:
+        options = CalibrationOptions(**keywords, **({} if vary is None else {"vary": vary}))
+    elif vary is not None or any(v != getattr(_D, k) for k, v in keywords.items()):
+        given = (["vary"] if vary is not None else []) + [k for k, v in keywords.items()
+                                                          if v != getattr(_D, k)]
+        raise TypeError(f"run_calibration: options= and the keywords {', '.join(given)}; "
+                        "allowed one of them")
+    o = options.validate(base)
+    target, vary, bounds, seeds, check_seeds = o.target, o.vary, o.bounds, o.seeds, o.check_seeds
+    initial, batch, max_evals, rate, confining = (o.initial, o.batch, o.max_evals, o.rate,
+                                                  o.confining)
+    eps_max, post_peak_strain, smooth = o.eps_max, o.post_peak_strain, o.smooth
     space = make_space(vary, base, bounds)
     header = _header(target, space, base, seeds, initial, batch, max_evals, rate, confining,
                      eps_max, post_peak_strain, smooth)

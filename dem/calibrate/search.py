@@ -374,10 +374,16 @@ def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max
     return best(), seen, trace, why, info
 
 
+def model_sets_min(d):
+    """The fewest evaluations inside the box the model needs in ``d`` dimensions (thin-plate
+    spline with a linear tail: d + 2, so that one can be left out); the least --initial
+    (``CalibrationOptions``)."""
+    return d + 2
+
+
 def space_dim_min(space):
-    """The fewest evaluations inside the box the model needs (thin-plate spline with a linear
-    tail in d dimensions: d + 2, so that one can be left out)."""
-    return len(space.names) + 2
+    """``model_sets_min`` of the space's dimension."""
+    return model_sets_min(len(space.names))
 
 
 def nearest_distance(P, ref):

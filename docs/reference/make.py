@@ -11,7 +11,7 @@ Each page is generated from two sources, so that it cannot drift from the code:
   ``common.options.add`` from the vocabulary (``common.options.VOCABULARY``); this script records
   what each call passed (the record that checks the value, the command's note, the default) and
   takes the range from the parser's own check or, where a record checks the value (``HParams``,
-  ``DemParams``, ``ProbeOptions``, ``BurstOptions``, ...), from that record's validation (it is
+  ``DemParams``, ``ProbeOptions``, ``BurstOptions``, ``CalibrationOptions``, ...), from that record's validation (it is
   asked with out-of-range values and its message says what is allowed);
 - the hand-written source of the page, docs/reference/src/<page>.md: what the command does, its
   files, how to read the result, its example and related commands. A file's columns are named
@@ -130,6 +130,7 @@ GLOSSARY_PARTS = {"crosscheck": ("dem", "fem", "hmodel")}
 # -- the ranges the records check ----------------------------------------------------------------
 def _record_classes():
     from dem.burst import BurstOptions
+    from dem.calibrate import CalibrationOptions
     from dem.params import DemParams
     from dem.probes import ProbeOptions
     from fem.biaxial import BiaxialConfig
@@ -137,7 +138,8 @@ def _record_classes():
     from hmodel.burst import Dynamics, Specimen
     from hmodel.params import HParams
     return {"HParams": HParams, "DemParams": DemParams, "ProbeOptions": ProbeOptions,
-            "BurstOptions": BurstOptions, "Specimen": Specimen, "Dynamics": Dynamics,
+            "BurstOptions": BurstOptions, "CalibrationOptions": CalibrationOptions,
+            "Specimen": Specimen, "Dynamics": Dynamics,
             "BiaxialConfig": BiaxialConfig, "BurstConfig": BurstConfig}
 
 

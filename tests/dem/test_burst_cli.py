@@ -236,6 +236,77 @@ def test_bad_input_is_one_line_exit_2_nothing_written(biaxial_300, tmp_path, cap
     assert not out.exists()
 
 
+class _Reached(Exception):
+    """Raised where run_burst starts its work, its options checked (no file written yet)."""
+
+
+def _stop_at_the_work(monkeypatch):
+    import dem.burst.command as command
+
+    def reached(*a, **k):
+        raise _Reached
+    monkeypatch.setattr(command, "checkpoint_header", reached)
+
+
+def test_the_size_rule_is_the_samples_own_on_the_command_line(biaxial_300, tmp_path, capsys,
+                                                              monkeypatch):
+    """The relaxation's cap against the sample's own size (issue 33): 30000 steps are two
+    equilibrium windows at 300 disks (22000), not at 1000 (40000): accepted, by the command line
+    and by run_burst after it; 20000 are not: refused in one line, exit 2, before any state is
+    loaded (the disk count is read from the biaxial test's summary.json) or anything written."""
+    from dem import io as dio
+    loaded = []
+    real_load = dio.load_state
+    monkeypatch.setattr(dio, "load_state", lambda *a, **k: loaded.append(a) or real_load(*a, **k))
+    out = tmp_path / "out"
+    code, err = _run(["burst", "--biaxial", str(biaxial_300), "--out", str(out),
+                      "--relax-max-steps", "20000"], capsys)
+    assert code == 2 and len(err) == 1 and err[0].startswith("error: --relax-max-steps 20000"), err
+    assert ">= 22000" in err[0] and "two equilibrium windows at 300 disks" in err[0], err
+    assert not loaded and not out.exists()
+    _stop_at_the_work(monkeypatch)
+    from dem.__main__ import main
+    with pytest.raises(_Reached):
+        main(["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
+              "--threads", "1", "--relax-max-steps", "30000"])
+    assert "error" not in capsys.readouterr().err and not out.exists()
+
+
+def test_the_size_rule_is_the_samples_own_in_run_burst(biaxial_300, tmp_path, monkeypatch):
+    """run_burst (the cross-check's call, unchecked before it) checks its options by the
+    command line's rule: the same ranges, the same rule of the sample's size, before any state
+    is loaded or file written."""
+    from dem.burst import BurstOptions, run_burst
+    out = tmp_path / "out"
+    for bad, words in ((BurstOptions(relax_max_steps=20000), "relax_max_steps >= 22000 (two "
+                        "equilibrium windows at 300 disks"), (BurstOptions(rate=11.0), "rate <= 10"),
+                       (BurstOptions(relax_max_steps=1000), "two equilibrium windows")):
+        with pytest.raises(ValueError) as e:
+            run_burst(biaxial_300, out, [-2.0], [0.9], bad, workers=1, verbose=False)
+        assert words in str(e.value) and "\n" not in str(e.value), str(e.value)
+    assert not out.exists()
+    _stop_at_the_work(monkeypatch)
+    with pytest.raises(_Reached):
+        run_burst(biaxial_300, out, [-2.0], [0.9], BurstOptions(relax_max_steps=30000),
+                  workers=1, verbose=False)
+    assert not out.exists()
+
+
+def test_the_size_rule_alone():
+    """BurstOptions: its ranges without the size (validate()), the rule of the size once it is
+    known (check_size, validate(n)): no size is assumed."""
+    from dem.burst import BurstOptions
+    o = BurstOptions(relax_max_steps=30000)
+    assert o.validate() is o and o.check_size(300) is o and o.validate(300) is o
+    for call in (lambda: o.check_size(1000), lambda: o.validate(1000)):
+        with pytest.raises(ValueError, match=r"relax_max_steps >= 40000 \(two equilibrium "
+                                             r"windows at 1000 disks"):
+            call()
+    with pytest.raises(ValueError, match="two equilibrium windows of the sample"):
+        BurstOptions(relax_max_steps=1999).validate()     # below two windows of any sample
+    assert BurstOptions(relax_max_steps=2000).validate(1).relax_max_steps == 2000
+
+
 def test_a_state_of_other_parameters_is_refused(biaxial_300, tmp_path, capsys):
     other = tmp_path / "bx"
     shutil.copytree(biaxial_300, other)

@@ -739,6 +739,84 @@ def test_bad_option_is_one_line_exit_2_nothing_written(tmp_path, capsys, argv, o
     assert not out.exists()
 
 
+# one validation per value (issue 33): the command line and run_calibration refuse a value by
+# the same rule (CalibrationOptions), in the same line; the cases where the two used to differ
+ONE_RULE = [
+    # (the command line's options, run_calibration's keywords)
+    (["--vary", "phi_g,kn_over_d", "--initial", "3"], {"vary": ("phi_g", "kn_over_d"),
+                                                       "initial": 3}),
+    (["--eps1-max", "0.004"], {"eps_max": 0.004}),          # the CLI took it, the library not
+    (["--rate", "11"], {"rate": 11.0}),                      # the library took them, the CLI not
+    (["--sigma2", "2e9"], {"confining": 2e9}),
+    (["--max-evals", "100001"], {"max_evals": 100_001}),
+    (["--eps1-max", "0.02", "--post-peak-strain", "0.03"], {"eps_max": 0.02,
+                                                            "post_peak_strain": 0.03}),
+    (["--check-seeds", "2"], {"check_seeds": (2,)}),
+    (["--vary", "phi_g", "--bounds", "kn_over_d=1e9:2e9"], {"vary": ("phi_g",),
+                                                             "bounds": {"kn_over_d": (1e9, 2e9)}}),
+]
+
+
+@pytest.mark.parametrize("argv,kw", ONE_RULE)
+def test_the_command_line_and_the_library_refuse_by_one_rule(tmp_path, capsys, monkeypatch, argv,
+                                                              kw):
+    import dem.__main__ as M
+    compiled = []
+    monkeypatch.setattr(M, "compile_kernels_once", lambda: compiled.append(1))
+    out = tmp_path / "cli"
+    code, err = _cli(["calibrate", "--out", str(out), "--n", "50", "--vary", "phi_g"] + argv,
+                     capsys)
+    assert code == 2 and len(err) == 1 and err[0].startswith("error: --" + argv[-2][2:]), err
+    assert not out.exists() and not compiled          # before the kernels, nothing written
+    kw = {"vary": ("phi_g",), **kw}
+    with pytest.raises(ValueError) as e:
+        C.run_calibration(str(tmp_path / "lib"), DemParams(n=50), workers=1, verbose=False,
+                          task=_synthetic_task, **kw)
+    assert err[0] == f"error: {e.value}"                 # the same rule, the same line
+    assert not (tmp_path / "lib").exists()
+
+
+def test_the_ranges_are_written_once():
+    """Each range of CalibrationOptions is the one the command's help says, and the parser
+    checks none of its own (only the type): a second copy of a range could differ."""
+    from dem.__main__ import build_parser
+    parser = build_parser()
+    (sub,) = [a for a in parser._actions if a.dest == "cmd"]
+    acts = sub.choices["calibrate"]._option_string_actions
+    for r in C.RANGES:
+        a = acts[r.option]
+        assert f"; allowed {C.CalibrationOptions.allowed_text(r.field)};" in a.help, a.help
+        assert a.type("-1e30" if r.kind == "real" else "-1000000000") < 0   # no range here
+    # the ranges the vocabulary holds for the options other commands share are the record's
+    from common.options import VOCABULARY
+    rate = {r.field: r for r in C.RANGES}["rate"]
+    t = VOCABULARY["--rate"]
+    assert (rate.lo, rate.hi, rate.lo_open, rate.hi_open) == (t.lo, t.hi, t.lo_open, t.hi_open)
+
+
+def test_the_ends_of_the_ranges_and_the_record_or_the_keywords(tmp_path):
+    O = C.CalibrationOptions
+    ok = O(vary="kn_over_d", initial=3, eps_max=0.005, post_peak_strain=0.0049, rate=10.0,
+           confining=1e9, max_evals=100_000, batch=64, smooth=0.0, check_seeds=()).validate()
+    assert ok.vary == ("kn_over_d",) and ok.check_seeds == () and isinstance(ok.eps_max, float)
+    assert O(vary="kn_over_d,phi_g", initial=4).validate().initial == 4
+    for bad in ({"initial": 4097}, {"batch": 0}, {"smooth": 0.05}, {"eps_max": 0.5},
+                {"initial": 16.0}, {"rate": float("nan")}, {"post_peak_strain": 0.035}):
+        with pytest.raises(ValueError, match=r"^--[a-z0-9-]+ .*: allowed "):
+            O(**bad).validate()
+    # run_calibration takes the record as it takes the keywords, not both
+    kw = dict(vary=("kn_over_d", "phi_g"), initial=8, max_evals=10, seeds=(3, 4),
+              check_seeds=(5,), bounds={"kn_over_d": (2e9, 32e9), "phi_g": (20.0, 50.0)})
+    a = _run(tmp_path / "kw", **kw)
+    b = C.run_calibration(str(tmp_path / "rec"), DemParams(n=100, seed=3), options=O(**kw),
+                          workers=1, verbose=False, task=_synthetic_task)
+    assert a["options"] == b["options"] and a["best_params"] == b["best_params"]
+    with pytest.raises(TypeError, match="initial"):
+        C.run_calibration(str(tmp_path / "both"), DemParams(n=100, seed=3), options=O(**kw),
+                          initial=9)
+    assert not (tmp_path / "both").exists()
+
+
 def test_default_vary_needs_its_fields(tmp_path, capsys):
     """The default --vary includes rolling_friction: without it in DemParams, one line naming
     --vary and the allowed names; with it, the default parses."""

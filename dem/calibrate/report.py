@@ -140,8 +140,9 @@ def _report(out_dir, s, space, records):
          f"{', '.join(space.names)} over "
          + ", ".join(f"{n} [{lo:.4g}, {hi:.4g}]{' (log)' if lg else ''}"
                      for n, lo, hi, lg in zip(space.names, space.lo, space.hi, space.log))
-         + f"; {s['evaluations']} sets, {s['runs']} runs, {s['wall_time'] / 60:.1f} min; "
-           f"stopped: **{s['stopped']}**.", "",
+         + f"; {s['evaluations']} sets, {s['runs']} runs ({s['run_now']} run by this "
+           f"invocation in {s['wall_time'] / 60:.1f} min, {s['taken_from_checkpoint']} taken "
+           f"from the checkpoint); stopped: **{s['stopped']}**.", "",
          "## Targets (H-model, Table I) and the best set (mean of the seeds)", "",
          "| figure | H-model | tolerance | best set | error |", "|---|---|---|---|---|"]
     units = {"peak_q": (1e-3, "kPa"), "eps1_95": (100, "%"), "secant": (1e-6, "MPa"),

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import numbers
 import os
 import re
 import signal
@@ -37,9 +38,11 @@ import sys
 import tempfile
 import threading
 from contextlib import contextmanager
+from typing import NamedTuple
 
 __all__ = ["OptionError", "Parser", "real", "integer", "reals", "add_quiet", "check_out_dir", "check_out_file",
            "Term", "VOCABULARY", "add", "add_out", "option_of", "record_error", "renamed_to",
+           "Range", "term_of", "vocabulary_range",
            "check_owner", "mark_owner", "folder_owner", "check_file", "check_folder", "check_csv",
            "check_memory", "param_option_error", "add_param_options", "params_from", "record_params",
            "Stage", "run_cli", "COMPILE_NOTICE", "announce_compilation", "listen_for_compilation"]
@@ -210,9 +213,11 @@ class Term:
     quantity, e.g. a file, a folder, a switch, a choice, a seed), ``kind`` ("real", "reals"
     (comma-separated), "int", "flag" (a switch, off unless given), "bool" (--x / --no-x),
     "path", "text", "choice"), the range (lo, hi, lo_open, hi_open; None: no bound) the parser
-    checks where no record does, ``fields`` (the record fields that check it where a command
-    binds the option to its record: "HParams.p0") and ``old`` (former names: (name, commands),
-    commands as "dem biaxial", () for every command that has this option)."""
+    checks where no record does (and a record whose field is listed in ``fields`` reads, where
+    the term has one: ``vocabulary_range``, so that the two cannot differ), ``fields`` (the
+    record fields that check it where a command binds the option to its record: "HParams.p0")
+    and ``old`` (former names: (name, commands), commands as "dem biaxial", () for every command
+    that has this option)."""
 
     name: str
     help: str
@@ -500,6 +505,101 @@ def record_error(e, record: str) -> "OptionError":
     if m is None:
         return OptionError(msg)
     return OptionError(f"{option_of(record, m.group(1))} {m.group(2)}")
+
+
+# -- a record's range of a field: its own, or the vocabulary's term of the field (issue 33) ------
+class Range(NamedTuple):
+    """The allowed values of a ``record``'s ``field``: an integer or a finite real in (lo, hi)
+    (open or closed ends; None: no bound; a field's name: that field's value, checked before).
+    A record writes its own ranges so, or reads them from the vocabulary (``vocabulary_range``)
+    where the field's option is a term other commands share: the range is then written once, in
+    the term. ``contains`` is the rule; ``text`` says it ("0 < value <= 10"), ``check`` refuses
+    in one line naming the option ("--rate 0.0: allowed 0 < value <= 10 [1/s]")."""
+    record: str                 # "CalibrationOptions"
+    field: str
+    kind: str                   # "int" or "real"
+    lo: float | str | None
+    hi: float | str | None
+    lo_open: bool = True
+    hi_open: bool = True
+    unit: str = ""
+
+    @property
+    def option(self) -> str:
+        return option_of(self.record, self.field)
+
+    def _end(self, bound, rec):
+        """(the bound's value, its text): a number, or another field's option (None: no
+        bound)."""
+        if bound is None:
+            return None, None
+        if isinstance(bound, str):
+            return (None if rec is None else getattr(rec, bound)), option_of(self.record, bound)
+        return bound, f"{bound:g}"
+
+    def text(self, name="value", unit=False) -> str:
+        """"1 <= value <= 64", "0 < value < --eps1-max" (as a help says it: no unit, no kind);
+        ``name`` in place of "value" ("0 < rate <= 10"), ``unit``: with the unit ("[1/s]")."""
+        lt = lambda is_open: "<" if is_open else "<="
+        lo, hi = self._end(self.lo, None)[1], self._end(self.hi, None)[1]
+        if self.hi is None:
+            rng = (f"{name} {'>' if self.lo_open else '>='} {lo}" if self.lo is not None
+                   else name)
+        elif self.lo is None:
+            rng = f"{name} {lt(self.hi_open)} {hi}"
+        else:
+            rng = f"{lo} {lt(self.lo_open)} {name} {lt(self.hi_open)} {hi}"
+        if unit and self.unit not in ("", "-", None):
+            rng += f" [{self.unit}]"
+        return rng
+
+    def contains(self, v, rec=None) -> bool:
+        """True if ``v`` is allowed: of the kind (an integer; a finite real), not a bool, inside
+        the ends (a bound that is another field: its value in ``rec``, unchecked without it)."""
+        ok = (isinstance(v, numbers.Integral) if self.kind == "int" else
+              isinstance(v, numbers.Real) and math.isfinite(v)) and not isinstance(v, bool)
+        for bound, is_open, above in ((self.lo, self.lo_open, True),
+                                      (self.hi, self.hi_open, False)):
+            b = self._end(bound, rec)[0]
+            if ok and b is not None:
+                ok = ((v > b if is_open else v >= b) if above else
+                      (v < b if is_open else v <= b))
+        return bool(ok)
+
+    def check(self, rec):
+        """The value of the field in ``rec`` as an int or a float; OptionError otherwise, one
+        line naming the option and what it allows."""
+        v = getattr(rec, self.field)
+        if not self.contains(v, rec):
+            others = [b for b in (self.lo, self.hi) if isinstance(b, str)]
+            given = "".join(f" ({option_of(self.record, b)} {getattr(rec, b)!r})"
+                            for b in others)
+            kind = "an integer " if self.kind == "int" else ""
+            raise OptionError(f"{self.option} {v!r}{given}: allowed {kind}"
+                              f"{self.text(unit=True)}")
+        return int(v) if self.kind == "int" else float(v)
+
+
+def term_of(record: str, field: str) -> Term:
+    """The vocabulary's term whose ``fields`` list the record's field ("BurstOptions", "rate"
+    -> the term of --rate); KeyError if none does (``option_of``'s guess of a name is no term of
+    the field: BurstOptions.strain_norm is no --strain-norm)."""
+    key = f"{record}.{field}"
+    for t in VOCABULARY.values():
+        if key in t.fields:
+            return t
+    raise KeyError(f"no term of the vocabulary lists {key}")
+
+
+def vocabulary_range(record: str, field: str, **ends) -> Range:
+    """The range of the vocabulary's term of the record's field (``term_of``: an option other
+    commands share, its range written there), with the ends ``ends`` gives (lo, hi, lo_open,
+    hi_open) in place of its own. Read at the call: a record that reads it in its validation
+    follows the term."""
+    t = term_of(record, field)
+    r = dict(lo=t.lo, hi=t.hi, lo_open=t.lo_open, hi_open=t.hi_open)
+    r.update(ends)
+    return Range(record, field, "int" if t.kind == "int" else "real", unit=t.unit or "", **r)
 
 
 def _default_text(term, default):

@@ -1,9 +1,10 @@
 """The burst's options (``dem.burst``): ``BurstOptions``, the path, the switches and the rule of
 the runs, each value checked once where the record is defined (``BurstOptions.validate``: its ranges,
-before the states load; ``BurstOptions.check_size``: the rule of the sample's size, once it is
-known, before the states load too; ``run_burst`` calls both, as the command line does); and
-the rule of the loaded peak along the path (``confirm_peak``, ``scan_peak``) and of the below
-switch (``below_row``)."""
+those of the options other commands share (--rate, --path-strain, --dc) read from the
+vocabulary, ``common.options.VOCABULARY``, before the states load; ``BurstOptions.check_size``:
+the rule of the sample's size, once it is known, before the states load too; ``run_burst``
+calls both, as the command line does); and the rule of the loaded peak along the path
+(``confirm_peak``, ``scan_peak``) and of the below switch (``below_row``)."""
 from __future__ import annotations
 
 import math
@@ -11,10 +12,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.options import vocabulary_range
+
 from ..settle import SettleRule
 
 SWITCHES = ("below", "past")
 HOLDS = ("dead_load", "servo")
+RECORD = "BurstOptions"
 
 
 class BurstOptions(NamedTuple):
@@ -49,20 +53,24 @@ class BurstOptions(NamedTuple):
                                      # one equilibrium window (``probe_rate_of``)
 
     def validate(self, n_disks=None) -> "BurstOptions":
-        """ValueError naming the option and its range for a bad value (the table below, and
-        ``dem.settle``'s rule); ``n_disks``: the sample's size, for the rule that depends on it
-        too (``check_size``; None: that rule is left to a later ``check_size``, once the size is
-        known)."""
+        """ValueError naming the option and its range for a bad value (the table below: the
+        vocabulary's ranges for --rate, --path-strain and --dc, this record's own for the rest;
+        and ``dem.settle``'s rule); ``n_disks``: the sample's size, for the rule that depends on
+        it too (``check_size``; None: that rule is left to a later ``check_size``, once the size
+        is known)."""
         from ..settle import window_steps
         self.rule().validate()            # the equilibrium's (window, check_every: used below)
-        checks = (("rate", 0 < self.rate <= 10, "0 < rate <= 10 [1/s]"),
-                  ("path_strain", 0 < self.path_strain < 0.5, "0 < path_strain < 0.5"),
+        # the range of a field whose option other commands share (--rate, --path-strain, --dc) is
+        # the vocabulary's term's, read from it (_shared); the others are written here, once
+        # (and the equilibrium's and max_steps' in dem.settle's SettleRule.validate)
+        checks = (self._shared("rate"),
+                  self._shared("path_strain"),
                   ("record_strain", 0 < self.record_strain < self.path_strain,
                    "0 < record_strain < path_strain"),
                   ("peak_drop", self.peak_drop > 0, "peak_drop > 0 [Pa]"),
                   ("peak_strain", 0 < self.peak_strain < 0.5, "0 < peak_strain < 0.5"),
                   ("below_rise", 0 < self.below_rise < 1, "0 < below_rise < 1"),
-                  ("dc", self.dc >= 0, "dc >= 0 [Pa]"),
+                  self._shared("dc"),
                   ("strain_norm", self.strain_norm > 0, "strain_norm > 0 [Pa]"),
                   ("wall_period_steps", self.wall_period_steps >= 20,
                    "wall_period_steps >= 20 (the leapfrog resolves the walls' period)"),
@@ -93,6 +101,13 @@ class BurstOptions(NamedTuple):
         if n_disks is not None:
             self.check_size(n_disks)
         return self
+
+    def _shared(self, name):
+        """(name, allowed, range's text), a row of ``validate``'s table, of a field whose option
+        other commands share: its range is the vocabulary's term's, read at each call
+        (``common.options.vocabulary_range``; KeyError if no term lists the field)."""
+        r = vocabulary_range(RECORD, name)
+        return name, r.contains(getattr(self, name)), r.text(name, unit=True)
 
     def check_size(self, n_disks) -> "BurstOptions":
         """The rule of the sample's size, once it is known (``validate`` checks the rest):

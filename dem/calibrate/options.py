@@ -8,7 +8,8 @@ The rule, written once:
 
 * the range of each value, in one table (``RANGES``): the record's own ranges here, and for an
   option other commands share (--rate, --sigma2; --eps1-max's upper end) the vocabulary's
-  (``common.options.VOCABULARY``), read from it, so that the two cannot differ; a bound may be
+  (``common.options.VOCABULARY``), read from it (``common.options.vocabulary_range``, as
+  ``dem.burst``'s ``BurstOptions`` reads its own), so that the two cannot differ; a bound may be
   another value of the record (--post-peak-strain < --eps1-max), checked after it;
 * the rules between two values (``CalibrationOptions.validate``): --initial at least the number
   of --vary fields + 2 (``search.model_sets_min``: the model of the figures needs that many
@@ -22,11 +23,8 @@ An error is one line ``--option value: allowed ...`` (an ``OptionError``, a Valu
 from __future__ import annotations
 
 import dataclasses
-import math
-import numbers
-from typing import NamedTuple
 
-from common.options import VOCABULARY, OptionError, option_of
+from common.options import OptionError, Range, vocabulary_range
 
 from .cli import DEFAULT_VARY, parse_bounds, parse_seeds, parse_vary
 from .search import make_space, model_sets_min
@@ -35,88 +33,33 @@ from .targets import SECANT_STRAIN, TARGETS
 RECORD = "CalibrationOptions"
 
 
-class Range(NamedTuple):
-    """The allowed values of a field: an integer or a finite real in (lo, hi) (open or closed
-    ends; None: no bound; a field's name: that field's value, checked before)."""
-    field: str
-    kind: str                   # "int" or "real"
-    lo: float | str | None
-    hi: float | str | None
-    lo_open: bool = True
-    hi_open: bool = True
-    unit: str = ""
-
-    @property
-    def option(self) -> str:
-        return option_of(RECORD, self.field)
-
-    def _end(self, bound, rec):
-        """(the bound's value, its text): a number, or another field's option."""
-        if isinstance(bound, str):
-            return (None if rec is None else getattr(rec, bound)), option_of(RECORD, bound)
-        return bound, f"{bound:g}"
-
-    def text(self) -> str:
-        """"1 <= value <= 64", "0 < value < --eps1-max" (as a help says it: no unit, no
-        kind)."""
-        lt = lambda is_open: "<" if is_open else "<="
-        lo, hi = self._end(self.lo, None)[1], self._end(self.hi, None)[1]
-        if self.hi is None:
-            rng = f"value {'>' if self.lo_open else '>='} {lo}"
-        elif self.lo is None:
-            rng = f"value {lt(self.hi_open)} {hi}"
-        else:
-            rng = f"{lo} {lt(self.lo_open)} value {lt(self.hi_open)} {hi}"
-        return rng
-
-    def check(self, rec):
-        """The value of the field in ``rec`` as an int or a float; OptionError otherwise."""
-        v = getattr(rec, self.field)
-        ok = (isinstance(v, numbers.Integral) if self.kind == "int" else
-              isinstance(v, numbers.Real) and math.isfinite(v)) and not isinstance(v, bool)
-        if ok:
-            v = int(v) if self.kind == "int" else float(v)
-            for bound, is_open, above in ((self.lo, self.lo_open, True),
-                                          (self.hi, self.hi_open, False)):
-                b = self._end(bound, rec)[0]
-                if b is not None:
-                    ok = ok and ((v > b if is_open else v >= b) if above else
-                                 (v < b if is_open else v <= b))
-        if not ok:
-            others = [b for b in (self.lo, self.hi) if isinstance(b, str)]
-            given = "".join(f" ({option_of(RECORD, b)} {getattr(rec, b)!r})" for b in others)
-            unit = f" [{self.unit}]" if self.unit not in ("", "-", None) else ""
-            kind = "an integer " if self.kind == "int" else ""
-            raise OptionError(f"{self.option} {getattr(rec, self.field)!r}{given}: allowed "
-                              f"{kind}{self.text()}{unit}")
-        return v
+def _range(field, kind, lo, hi, lo_open=True, hi_open=True, unit="") -> Range:
+    """The record's own range of ``field`` (``common.options.Range``)."""
+    return Range(RECORD, field, kind, lo, hi, lo_open, hi_open, unit)
 
 
 def _vocabulary(field, **ends) -> Range:
     """The range of the vocabulary's term of ``field`` (an option other commands share: its range
     is written there), with the ends ``ends`` gives in place of its own."""
-    t = VOCABULARY[option_of(RECORD, field)]
-    r = dict(lo=t.lo, hi=t.hi, lo_open=t.lo_open, hi_open=t.hi_open)
-    r.update(ends)
-    return Range(field, "int" if t.kind == "int" else "real", unit=t.unit or "", **r)
+    return vocabulary_range(RECORD, field, **ends)
 
 
 # The range of every value, once (in the order they are checked: a bound that is another field
 # comes after that field's own range).
 RANGES = (
     # at least 1 varied + 2 (the rule of the --vary fields' number is below, in validate)
-    Range("initial", "int", model_sets_min(1), 4096, False, False),
-    Range("batch", "int", 1, 64, False, False),
+    _range("initial", "int", model_sets_min(1), 4096, False, False),
+    _range("batch", "int", 1, 64, False, False),
     # the model of the figures is refitted on every set (leave-one-out over all of them, and the
     # distances between every two: 80 GB of them at 100,000 sets)
-    Range("max_evals", "int", 1, 100_000, False, False),
+    _range("max_evals", "int", 1, 100_000, False, False),
     _vocabulary("rate"),                      # the vocabulary's --rate, as dem biaxial's
     _vocabulary("confining"),                 # the vocabulary's --sigma2
     # the test reaches twice the secant strain at least (the figures read the secant there);
     # its upper end is the vocabulary's --eps1-max
     _vocabulary("eps_max", lo=2 * SECANT_STRAIN, lo_open=False),
-    Range("post_peak_strain", "real", 0, "eps_max", unit="-"),
-    Range("smooth", "real", 0, 0.05, False, True, unit="-"),
+    _range("post_peak_strain", "real", 0, "eps_max", unit="-"),
+    _range("smooth", "real", 0, 0.05, False, True, unit="-"),
 )
 _RANGE = {r.field: r for r in RANGES}
 

@@ -1,6 +1,7 @@
 """`python -m dem burst`: its outputs (docs/burst.md columns) on a 300-disk biaxial test, and bad
 input refused in one line with exit code 2 before anything is computed or written."""
 import json
+import math
 import shutil
 import signal
 
@@ -305,6 +306,79 @@ def test_the_size_rule_alone():
     with pytest.raises(ValueError, match="two equilibrium windows of the sample"):
         BurstOptions(relax_max_steps=1999).validate()     # below two windows of any sample
     assert BurstOptions(relax_max_steps=2000).validate(1).relax_max_steps == 2000
+
+
+def _refused(field, **kw):
+    """The message of BurstOptions(**kw).validate() if it refuses ``field`` (its message starts
+    "field="), else None (accepted, or another field refused)."""
+    from dem.burst import BurstOptions
+    try:
+        BurstOptions(**kw).validate()
+    except ValueError as e:
+        if str(e).startswith(f"{field}="):
+            return str(e)
+    return None
+
+
+def _ends(field, t):
+    """(value, refused?) at and just beyond each end of the vocabulary's term ``t``."""
+    step = ((lambda v, to: v + (1 if to > v else -1)) if t.kind == "int" else
+            (lambda v, to: math.nextafter(v, to)))
+    out = []
+    for end, is_open, outward in ((t.lo, t.lo_open, -math.inf), (t.hi, t.hi_open, math.inf)):
+        if end is not None:
+            out += [(end, is_open), (step(end, outward), True), (step(end, -outward), False)]
+    return out
+
+
+def test_the_ranges_of_the_shared_options_are_the_vocabularys():
+    """Issue 33, one validation per value: a BurstOptions field whose option is a term of the
+    vocabulary with a range (--rate, --path-strain, --dc; --max-steps, by dem.settle's rule)
+    is refused and accepted by validate exactly at the term's ends, and the message says the
+    term's range."""
+    from common.options import VOCABULARY, term_of
+    from dem.burst import BurstOptions
+    shared = {}
+    for f in BurstOptions._fields:
+        ts = [t for t in VOCABULARY.values() if f"BurstOptions.{f}" in t.fields]
+        if ts:
+            assert ts == [term_of("BurstOptions", f)]
+            if ts[0].bounded:
+                shared[f] = ts[0]
+        else:
+            with pytest.raises(KeyError):       # no guess by name: strain_norm is not --strain-norm
+                term_of("BurstOptions", f)
+    assert {"rate", "path_strain", "dc"} <= set(shared), shared
+    for f, t in shared.items():
+        for v, refused in _ends(f, t):
+            kw = {f: v}
+            if f == "path_strain" and v > 0:      # record_strain < path_strain, checked after it
+                kw["record_strain"] = min(5e-6, v / 2)
+            msg = _refused(f, **kw)
+            assert (msg is not None) == refused, (f, v, msg)
+            if msg and f in ("rate", "path_strain", "dc"):
+                assert msg.endswith(f"allowed range: {t.range_text().replace('value', f)}"
+                                    + (f" [{t.unit}]" if t.unit not in ("-", None) else "")), msg
+
+
+def test_validate_reads_the_vocabulary_it_writes_no_copy(monkeypatch):
+    """The ranges of --rate, --path-strain and --dc are read from the vocabulary at validate:
+    another term's range, narrower or wider, is followed (a copy written in validate would keep
+    refusing or accepting by its own)."""
+    import dataclasses
+    import common.options as O
+    cases = {"--rate": ("rate", {"hi": 5.0}, 6.0, {"hi": 20.0}, 15.0),
+             "--path-strain": ("path_strain", {"hi": 0.2}, 0.3, {"hi": 0.9}, 0.7),
+             "--dc": ("dc", {"lo": 10.0}, 5.0, {"lo": -10.0}, -5.0)}
+    for name, (field, narrow, out, wide, now_in) in cases.items():
+        term = O.VOCABULARY[name]
+        assert _refused(field, **{field: out}) is None and _refused(field, **{field: now_in})
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **narrow))
+        msg = _refused(field, **{field: out})
+        assert msg and O.VOCABULARY[name].range_text().replace("value", field) in msg, (name, msg)
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **wide))
+        assert _refused(field, **{field: now_in}) is None, name
+        monkeypatch.setitem(O.VOCABULARY, name, term)
 
 
 def test_a_state_of_other_parameters_is_refused(biaxial_300, tmp_path, capsys):

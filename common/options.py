@@ -215,7 +215,8 @@ class Term:
     "path", "text", "choice"), the range (lo, hi, lo_open, hi_open; None: no bound) the parser
     checks where no record does (and a record whose field is listed in ``fields`` reads, where
     the term has one: ``vocabulary_range``, so that the two cannot differ), ``fields`` (the
-    record fields that check it where a command binds the option to its record: "HParams.p0")
+    record fields that check it where a command binds the option to its record: "HParams.p0";
+    or a function's argument that reads the range: "hmodel.run_burst.dc")
     and ``old`` (former names: (name, commands), commands as "dem biaxial", () for every command
     that has this option)."""
 
@@ -378,9 +379,11 @@ VOCABULARY = {t.name: t for t in (
        "-", "reals", 0, 1, hi_open=False, fields=("BurstConfig.start_fractions",),
        old=(("--burst-fractions", ("crosscheck",)),)),
     _T("--dc", "step of c = s1 + R s2 held after the switch (dG = B dc per unit thickness)",
-       "Pa", "real", 0, None, False, fields=("BurstConfig.dc", "BurstOptions.dc")),
+       "Pa", "real", 0, None, False,
+       fields=("BurstConfig.dc", "BurstOptions.dc", "hmodel.run_burst.dc")),
     _T("--path-strain", "largest axial strain of a proportional path from its start", "-",
-       "real", 0, 0.5, fields=("BurstConfig.path_strain", "BurstOptions.path_strain")),
+       "real", 0, 0.5, fields=("BurstConfig.path_strain", "BurstOptions.path_strain",
+                                "hmodel.run_burst.path_strain")),
     _T("--path-d-eps1", "axial strain step of the proportional paths", "-", "real", 0, 0.05,
        fields=("BurstConfig.path_d_eps1",)),
     _T("--width", "specimen width B", "m", "real", 0, None,

@@ -37,6 +37,7 @@ import numpy as np
 from hmodel.burst_rule import (RELEASE, BurstRule, check_columns, ke_growth, release_columns,
                                release_ratio)
 from common.io import atomic_write_bytes, fmt, save_figure
+from common.options import vocabulary_range
 from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
@@ -49,6 +50,8 @@ from .solver import LoadStepper, StaticLoss
 __all__ = ["BurstConfig", "run_burst", "BurstResult", "BURST_COLUMNS", "PATH_COLUMNS",
            "DRAINED_EPS1_MAX", "limit_bracket"]
 
+# the record's name in the vocabulary's terms (``common.options.VOCABULARY``: "BurstConfig.dc")
+RECORD = "BurstConfig"
 # the drained FE path gives up here if a start state is not reached [-]
 DRAINED_EPS1_MAX = 0.1
 # the material point's drained curve is computed to this axial strain (its peak ~2.1 %) [-]
@@ -101,7 +104,9 @@ class BurstConfig:
 
     def validate(self) -> "BurstConfig":
         """Every value of this config out of its range raises ValueError naming the option
-        (the CLI's spelling) and the allowed range."""
+        (the CLI's spelling) and the allowed range: the ranges of --dc and --path-strain are the
+        vocabulary's terms', read from it at each call (``common.options.vocabulary_range``, as
+        ``dem.burst``'s and ``hmodel.burst.run_burst`` do: written once, in the term)."""
         def bad(name, v, allowed):
             raise ValueError(f"{name} {v!r} is out of range: allowed {allowed}")
         if not self.ratios:
@@ -113,8 +118,9 @@ class BurstConfig:
         for f in self.start_fractions:
             if not (isinstance(f, (int, float)) and math.isfinite(f) and 0 < f < 1):
                 bad("--start-fractions", f, "0 < f < 1 (a fraction of the drained peak eta)")
-        if not (math.isfinite(self.dc_value) and self.dc_value >= 0):
-            bad("--dc", self.dc, "dc >= 0 [Pa]")
+        r = vocabulary_range(RECORD, "dc")
+        if not r.contains(self.dc_value):
+            bad(r.option, self.dc, r.text("dc", unit=True))
         if not (math.isfinite(self.density) and self.density > 0):
             bad("--density", self.density, "density > 0 [kg/m^3]")
         if not (math.isfinite(self.damping_ratio) and 0 <= self.damping_ratio < 1):
@@ -122,8 +128,9 @@ class BurstConfig:
         if not (isinstance(self.steps_per_period, int) and self.steps_per_period >= 10):
             bad("--steps-per-period", self.steps_per_period,
                 "an integer >= 10 (dt = T1 / steps must resolve the lowest period T1)")
-        if not (math.isfinite(self.path_strain) and 0 < self.path_strain < 0.5):
-            bad("--path-strain", self.path_strain, "0 < path strain < 0.5")
+        r = vocabulary_range(RECORD, "path_strain")
+        if not r.contains(self.path_strain):
+            bad(r.option, self.path_strain, r.text("path strain", unit=True))
         if not (math.isfinite(self.path_d_eps1)
                 and 0 < self.path_d_eps1 < min(0.05, self.path_strain)):
             bad("--path-d-eps1", self.path_d_eps1, "0 < step < min(0.05, --path-strain)")

@@ -31,6 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.options import vocabulary_range
+
 from .burst_rule import (RELEASE, BurstRule, EnergyCheck, check_columns, decide as decide_outcome,
                          ke_growth, release_columns)
 from .controllability import control_scan, decide, verdict_text
@@ -49,6 +51,9 @@ __all__ = ["check_ratio", "Specimen", "Dynamics", "PathInfo", "HoldResult", "con
 
 BELOW_RISE = 0.95     # ``below``: c_start + BELOW_RISE (c_peak - c_start), docs/burst.md
 SCAN_STRAIN = 2e-3    # static_check: the bracket |d eps1| <= this of the scan along the tie
+# run_burst's name in the vocabulary's terms (``common.options.VOCABULARY``: the fields
+# "hmodel.run_burst.dc", "hmodel.run_burst.path_strain" of --dc and --path-strain)
+RECORD = "hmodel.run_burst"
 
 
 class Specimen(NamedTuple):
@@ -531,8 +536,14 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
     fr = [float(f) for f in start_fractions]
     if any(not (0 < f < 1) for f in fr):
         raise ValueError(f"start fractions {fr} out of range: allowed 0 < f < 1 of the drained peak eta")
-    if not (math.isfinite(dc) and dc >= 0):
-        raise ValueError(f"dc = {dc!r} is out of range: allowed a finite dc >= 0 [Pa]")
+    # the ranges of dc and path_strain are the vocabulary's terms' (--dc, --path-strain), read
+    # from them at each call: written once, in the term (as fem.burst's BurstConfig and
+    # dem.burst's BurstOptions read them)
+    for name, v in (("dc", dc), ("path_strain", path_strain)):
+        r = vocabulary_range(RECORD, name)
+        if not r.contains(v):
+            raise ValueError(f"{name} = {v!r} is out of range: allowed a finite "
+                             f"{r.text(name, unit=True)}")
     say = progress or (lambda s: None)
     eta_peak, drained = drained_peak_eta(params, d_eps1)
     say(f"drained path: peak eta = {eta_peak:.4f}")

@@ -380,3 +380,33 @@ def test_progress_and_table_lines(tmp_path, capsys):
              if line.split()[:2] == ["-2", "0.9"]}
     assert table["below"][-3] == "never" and float(table["past"][-3]) > 0
     assert "E_c - E_c(0) passed 2 W2_ext at t = " in err
+
+
+def test_validate_reads_the_vocabulary_it_writes_no_copy(monkeypatch):
+    """The ranges of --dc and --path-strain are read from the vocabulary's terms at validate
+    (issue 33): another term's range, narrower or wider, is followed (a copy written in
+    validate would keep refusing or accepting by its own), and the message says the term's."""
+    import dataclasses
+    import common.options as O
+    from common.options import term_of
+
+    def refused(**kw):
+        try:
+            BurstConfig(specimen=SMALL_CFG, **kw).validate()
+        except ValueError as e:
+            return str(e)
+        return None
+
+    cases = {"--dc": ("dc", "dc", {"lo": 10.0}, 5.0, {"lo": -10.0}, -5.0),
+             "--path-strain": ("path_strain", "path strain", {"hi": 0.2}, 0.3, {"hi": 0.9}, 0.7)}
+    for name, (field, word, narrow, out, wide, now_in) in cases.items():
+        term = O.VOCABULARY[name]
+        assert term_of("BurstConfig", field) is term
+        assert refused(**{field: out}) is None and refused(**{field: now_in})
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **narrow))
+        msg = refused(**{field: out})
+        assert msg and msg.startswith(f"{name} {out!r} is out of range: allowed "), (name, msg)
+        assert O.VOCABULARY[name].range_text().replace("value", word) in msg, (name, msg)
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **wide))
+        assert refused(**{field: now_in}) is None, name
+        monkeypatch.setitem(O.VOCABULARY, name, term)

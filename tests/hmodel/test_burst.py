@@ -523,3 +523,47 @@ def test_path_stiffness_from_the_tangent_follows_c_and_vanishes_at_its_peak(para
     curv = np.abs(np.diff(dc)).max()
     assert np.abs(dc - k * 1e-5).max() <= 0.02 * np.abs(dc).max() + curv
     assert np.all(k[:pk.peak - 1] > 0) and np.all(k[pk.peak:] <= 0)
+
+
+def test_run_burst_reads_the_vocabulary_it_writes_no_copy(monkeypatch):
+    """run_burst's ranges of dc and path_strain are the vocabulary's terms' (--dc, --path-strain),
+    read at the call (issue 33): another term's range, narrower or wider, is followed, and the
+    message says the term's. Accepted values stop at the drained path (replaced: nothing runs)."""
+    import dataclasses
+    import common.options as O
+    import hmodel.burst as hb
+    from common.options import term_of
+    from hmodel import HParams
+
+    class Accepted(Exception):
+        pass
+
+    def stop(*a, **k):
+        raise Accepted
+
+    monkeypatch.setattr(hb, "drained_peak_eta", stop)
+
+    def refused(dc=100.0, path_strain=0.03):
+        try:
+            hb.run_burst(HParams(), [-2.0], [0.9], dc, path_strain=path_strain)
+        except Accepted:
+            return None
+        except ValueError as e:
+            return str(e)
+        raise AssertionError("run_burst ran past its checks")
+
+    cases = {"--dc": ("dc", {"lo": 10.0}, 5.0, {"lo": -10.0}, -5.0),
+             "--path-strain": ("path_strain", {"hi": 0.2}, 0.3, {"hi": 0.9}, 0.7)}
+    for name, (field, narrow, out, wide, now_in) in cases.items():
+        term = O.VOCABULARY[name]
+        assert term_of(hb.RECORD, field) is term
+        assert refused(**{field: out}) is None and refused(**{field: now_in})
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **narrow))
+        msg = refused(**{field: out})
+        assert msg and msg.startswith(f"{field} = {out!r} is out of range: allowed a finite "), msg
+        assert O.VOCABULARY[name].range_text().replace("value", field) in msg, (name, msg)
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **wide))
+        assert refused(**{field: now_in}) is None, name
+        monkeypatch.setitem(O.VOCABULARY, name, term)
+    assert "a finite dc >= 0 [Pa]" in refused(dc=-1.0)     # the message's form, as before
+    assert "a finite 0 < path_strain < 0.5" in refused(path_strain=0.0)

@@ -1,7 +1,8 @@
 """The calibrated set at 12,000 disks against the H-model, beside the set fitted before issue 27
 (the gallery's figure calibration_12000.png):
 
-    python docs/gallery/calibration/plot_12000.py NEW/biaxial.csv OLD/biaxial.csv OUT.png
+    python docs/gallery/calibration/plot_12000.py NEW/biaxial.csv OLD/biaxial.csv OUT.png \
+        [NEW_LABEL OLD_LABEL]
 
 NEW and OLD are `python -m dem biaxial --params calibrated.json --n 12000 --no-vtk --out DIR`
 runs of this folder's calibrated.json and of before_issue27/calibrated.json.  The figures (peak
@@ -24,16 +25,16 @@ def read(path):
             np.array([float(r["eps_v"]) for r in rows]))
 
 
-def main(new, old, out):
+def main(new, old, out, new_label="calibrated (issue 27)",
+         old_label="the set before issue 27"):
     h = hmodel_curve()
     hf = curve_figures(h["eps1"], h["q"], 0.0, eps_v=h["eps_v"])
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4.3))
+    fig, ax = plt.subplots(1, 2, figsize=(11, 5.0), layout="constrained")
     ax[0].plot(100 * np.asarray(h["eps1"]), np.asarray(h["q"]) / 1e3, "k-", lw=1.6,
                label="H-model (Table I)")
     ax[1].plot(100 * np.asarray(h["eps1"]), 100 * np.asarray(h["eps_v"]), "k-", lw=1.6)
     ax[0].plot([100 * hf["eps1_95"]], [PEAK_FRACTION * hf["peak_q"] / 1e3], "ko", ms=5)
-    for path, label, col in ((new, "calibrated (issue 27)", "C3"),
-                             (old, "the set before issue 27", "0.55")):
+    for path, label, col in ((new, new_label, "C3"), (old, old_label, "0.55")):
         e, q, ev = read(path)
         f = curve_figures(e, q, 0.001, eps_v=ev)
         c = compare(f, hf)
@@ -55,12 +56,12 @@ def main(new, old, out):
         a.set_xlabel("axial strain eps1 [%]")
         a.set_xlim(0, 5.5)
         a.grid(alpha=0.3)
-    ax[0].legend(fontsize=7, loc="lower right")
+    fig.legend(*ax[0].get_legend_handles_labels(), loc="outside lower center", fontsize=7,
+               frameon=False)
     ax[0].set_title("dots: q at 95 % of the peak (box: its tolerances); triangles: the peak",
                     fontsize=8)
-    fig.tight_layout()
     fig.savefig(out, dpi=120)
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:4])
+    main(*sys.argv[1:6])

@@ -162,13 +162,17 @@ def _check_calibration_figures(caught, s):
     # each panel's title describes that panel
     assert "dots" in left.get_title() and "dots" not in right.get_title()
     assert "volumetric" in right.get_title() and right.get_ylabel().startswith("eps_v")
-    # one colour per seed of the best set, the check seed dashed as its label says
+    # one colour per seed of the best set, the check seeds dashed as their label says
     colours = {ln.get_label(): ln.get_color() for ln in left.get_lines()}
     fitted = [c for lab, c in colours.items() if "calibrated set, seed" in lab
               and "(fitted on)" in lab]
-    assert len(fitted) == 2 and len(set(fitted)) == 2
+    n_fit = len(s["options"]["seeds"])
+    assert len(fitted) == n_fit and len(set(fitted)) == n_fit
     assert F.line_styles(left, "dashed: not fitted on") == {"--"}
     assert F.line_styles(left, "(fitted on)") == {"-"}
+    # the check's verdict, the check seeds' mean, drawn as a diamond of the check's colour
+    diamonds = [ln for ln in left.get_lines() if ln.get_marker() == "D" and ln.get_color() == "C0"]
+    assert len(diamonds) == (1 if s.get("check_mean") else 0)
 
     fig = caught["calibration_score.png"]
     F.assert_readable(fig)

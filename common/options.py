@@ -185,6 +185,18 @@ def integer(lo=1, hi=None):
     return parse
 
 
+def argtype(parse, name=None):
+    """argparse type from a parser raising ValueError (whose message says what is allowed):
+    argparse then prints that message after the option's name."""
+    def typed(text):
+        try:
+            return parse(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    typed.__name__ = name or parse.__name__
+    return typed
+
+
 def reals(lo=None, hi=None, *, lo_open=True, hi_open=True, unit=""):
     """argparse type: one or more comma-separated ``real`` values, as a list."""
     one = real(lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)

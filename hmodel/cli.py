@@ -382,7 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
     u = sub.add_parser("burst", help="proportional strain paths, c controlled past its peak: the "
                                      "burst of kinetic energy (docs/burst.md)")
     opt.add_out(u)
-    add(u, "--ratios", [-1.0, -1.5, -2.0, -3.0], parse=_arg(_check_ratios))
+    add(u, "--ratios", [-1.0, -1.5, -2.0, -3.0], parse=opt.argtype(_check_ratios))
     add(u, "--start-fractions", [0.90, 0.95], note="f < 1 here (a state below the drained peak)")
     add(u, "--dc", default_text="1e-4 sigma2, as fem burst")
     add(u, "--sigma2", record="HParams", default_text=p0)
@@ -403,9 +403,9 @@ def build_parser() -> argparse.ArgumentParser:
     f = sub.add_parser("fit", help="fit the H-model to a measured drained biaxial curve (docs/fit.md)")
     opt.add_out(f)
     add(f, "--data", required=True, metavar="CSV")
-    add(f, "--free", hfit.DEFAULT_FREE, parse=_arg(hfit.parse_free),
+    add(f, "--free", hfit.DEFAULT_FREE, parse=opt.argtype(hfit.parse_free),
         note=f"of {', '.join(hfit.FREE_CHOICES)}; the others as given")
-    add(f, "--bounds", {}, parse=_arg(hfit.parse_bounds),
+    add(f, "--bounds", {}, parse=opt.argtype(hfit.parse_bounds),
         default_text="x/100 to x*100 of the start for kn, kt, r_g, p0; phi_g 2:60; alpha0 31:70")
     add(f, "--starts", 8)
     add(f, "--seed", 0, note="of the starts")
@@ -433,17 +433,6 @@ def _check_ratios(text):
     from .burst import check_ratio
     vals = opt.reals()(text)
     return [check_ratio(v, None) for v in vals]
-
-
-def _arg(parse):
-    """argparse type from a parser raising ValueError (the message says what is allowed)."""
-    def typed(text):
-        try:
-            return parse(text)
-        except ValueError as e:
-            raise argparse.ArgumentTypeError(str(e)) from None
-    typed.__name__ = parse.__name__
-    return typed
 
 
 def main(argv=None) -> int:

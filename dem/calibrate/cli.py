@@ -3,9 +3,10 @@ varied and their names on the command line (``--vary``, ``--bounds``), the seeds
 ``--check-seeds``); each a parser raising ValueError and its argparse type."""
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
+
+from common.options import argtype
 
 from ..params import OPTIONS, RENAMED, DemParams
 
@@ -68,12 +69,8 @@ def parse_vary(text):
     return tuple(out)
 
 
-def vary_type(text):
-    """argparse type of --vary."""
-    try:
-        return parse_vary(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+# argparse type of --vary
+vary_type = argtype(parse_vary, "vary_type")
 
 
 def parse_bounds(value):
@@ -107,12 +104,8 @@ def parse_bounds(value):
     return out
 
 
-def bounds_type(text):
-    """argparse type of --bounds NAME=LO:HI[,NAME=LO:HI...] -> {field: (lo, hi)}."""
-    try:
-        return parse_bounds(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+# argparse type of --bounds NAME=LO:HI[,NAME=LO:HI...] -> {field: (lo, hi)}
+bounds_type = argtype(parse_bounds, "bounds_type")
 
 
 def parse_seeds(text):
@@ -126,9 +119,5 @@ def parse_seeds(text):
     return out
 
 
-def seeds_type(text):
-    """argparse type of --seeds and --check-seeds."""
-    try:
-        return parse_seeds(text)
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
+# argparse type of --seeds and --check-seeds
+seeds_type = argtype(parse_seeds, "seeds_type")

@@ -38,6 +38,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.options import vocabulary_range
+
 from .anatomy import ANATOMY_COLUMNS
 from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS
 
@@ -65,6 +67,7 @@ class SettleRule(NamedTuple):
     fail_strain: float = math.inf   # failure: |de| beyond this, whatever the scale [-]
 
     def validate(self, prefix=""):
+        max_steps = vocabulary_range("SettleRule", "max_steps")
         checks = (("unbalanced_tol", 0 < self.unbalanced_tol < 1, "0 < unbalanced_tol < 1"),
                   ("stress_tol", self.stress_tol > 0, "stress_tol > 0 [Pa]"),
                   ("strain_tol", 0 < self.strain_tol < 1, "0 < strain_tol < 1"),
@@ -74,7 +77,8 @@ class SettleRule(NamedTuple):
                   ("runaway_ratio", self.runaway_ratio > 1, "runaway_ratio > 1"),
                   ("fail_ratio", self.fail_ratio > self.runaway_ratio,
                    "fail_ratio > runaway_ratio"),
-                  ("max_steps", self.max_steps > 0, "max_steps > 0"),
+                  # the range of the vocabulary's --max-steps (written once, there)
+                  ("max_steps", max_steps.contains(self.max_steps), max_steps.text("max_steps")),
                   ("runaway_stress", self.runaway_stress > 0, "runaway_stress > 0 [Pa]"),
                   ("fail_strain", self.fail_strain > 0, "fail_strain > 0"))
         for name, ok, rng in checks:

@@ -104,8 +104,9 @@ class BurstConfig:
 
     def validate(self) -> "BurstConfig":
         """Every value of this config out of its range raises ValueError naming the option
-        (the CLI's spelling) and the allowed range: the ranges of --dc and --path-strain are the
-        vocabulary's terms', read from it at each call (``common.options.vocabulary_range``, as
+        (the CLI's spelling) and the allowed range: the ranges of --start-fractions (its upper end
+        open), --dc, --damping-ratio, --steps-per-period and --path-strain are the vocabulary's
+        terms', read from it at each call (``common.options.vocabulary_range``, as
         ``dem.burst``'s and ``hmodel.burst.run_burst`` do: written once, in the term)."""
         def bad(name, v, allowed):
             raise ValueError(f"{name} {v!r} is out of range: allowed {allowed}")
@@ -115,19 +116,24 @@ class BurstConfig:
             check_ratio(r)
         if not self.start_fractions:
             bad("--start-fractions", self.start_fractions, "one or more fractions")
+        # the term's range with its upper end open: a start lies below the drained peak (f < 1;
+        # the DEM's saved states include the peak, f = 1)
+        r = vocabulary_range(RECORD, "start_fractions", hi_open=True)
         for f in self.start_fractions:
-            if not (isinstance(f, (int, float)) and math.isfinite(f) and 0 < f < 1):
-                bad("--start-fractions", f, "0 < f < 1 (a fraction of the drained peak eta)")
+            if not r.contains(f):
+                bad(r.option, f, r.text("f") + " (a fraction of the drained peak eta)")
         r = vocabulary_range(RECORD, "dc")
         if not r.contains(self.dc_value):
             bad(r.option, self.dc, r.text("dc", unit=True))
         if not (math.isfinite(self.density) and self.density > 0):
             bad("--density", self.density, "density > 0 [kg/m^3]")
-        if not (math.isfinite(self.damping_ratio) and 0 <= self.damping_ratio < 1):
-            bad("--damping-ratio", self.damping_ratio, "0 <= zeta < 1")
-        if not (isinstance(self.steps_per_period, int) and self.steps_per_period >= 10):
-            bad("--steps-per-period", self.steps_per_period,
-                "an integer >= 10 (dt = T1 / steps must resolve the lowest period T1)")
+        r = vocabulary_range(RECORD, "damping_ratio")
+        if not r.contains(self.damping_ratio):
+            bad(r.option, self.damping_ratio, r.text("zeta"))
+        r = vocabulary_range(RECORD, "steps_per_period")
+        if not r.contains(self.steps_per_period):
+            bad(r.option, self.steps_per_period, f"{r.text('steps')}, an integer (dt = T1 / steps "
+                "must resolve the lowest period T1)")
         r = vocabulary_range(RECORD, "path_strain")
         if not r.contains(self.path_strain):
             bad(r.option, self.path_strain, r.text("path strain", unit=True))

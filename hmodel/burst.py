@@ -86,10 +86,15 @@ class Specimen(NamedTuple):
         return 0.5 * self.density * 0.25 * B * H * float(np.sum(v2))
 
     def validate(self):
-        for name in ("width", "height", "density"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} = {v!r} is out of range: allowed a finite {name} > 0")
+        # width and height: the ranges of the vocabulary's --width and --height (written once,
+        # there); density: its own (--density's term has no range)
+        for name in ("width", "height"):
+            v, r = getattr(self, name), vocabulary_range("Specimen", name)
+            if not r.contains(v):
+                raise ValueError(f"{name} = {v!r} is out of range: allowed a finite {r.text(name)}")
+        v = self.density
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"density = {v!r} is out of range: allowed a finite density > 0")
         return self
 
 
@@ -102,12 +107,18 @@ class Dynamics(NamedTuple):
     rule: BurstRule = BurstRule()
 
     def validate(self):
+        # the ranges of the vocabulary's --damping-ratio and --steps-per-period (written once,
+        # there); steps_per_period read as a real (its default 20.0: a whole number of steps per
+        # period is not needed by the integration here, only enough of them)
         z, n = self.damping_ratio, self.steps_per_period
-        if not (math.isfinite(z) and 0 <= z < 1):
-            raise ValueError(f"damping_ratio = {z!r} is out of range: allowed 0 <= zeta < 1")
-        if not (math.isfinite(n) and n >= 10):
-            raise ValueError(f"steps_per_period = {n!r} is out of range: allowed >= 10 (a time step "
-                             "that resolves the lowest period)")
+        r = vocabulary_range("Dynamics", "damping_ratio")
+        if not r.contains(z):
+            raise ValueError(f"damping_ratio = {z!r} is out of range: allowed {r.text('zeta')}")
+        r = vocabulary_range("Dynamics", "steps_per_period")._replace(kind="real")
+        if not r.contains(n):
+            raise ValueError(f"steps_per_period = {n!r} is out of range: allowed "
+                             f"{r.text('steps_per_period')} (a time step that resolves the lowest "
+                             "period)")
         self.rule.validate()
         return self
 
@@ -534,8 +545,11 @@ def run_burst(params: HParams, ratios, start_fractions, dc: float, specimen: Spe
     for R in ratios:
         check_ratio(R, None)
     fr = [float(f) for f in start_fractions]
-    if any(not (0 < f < 1) for f in fr):
-        raise ValueError(f"start fractions {fr} out of range: allowed 0 < f < 1 of the drained peak eta")
+    # --start-fractions' range with its upper end open: a start lies below the drained peak
+    r = vocabulary_range(RECORD, "start_fractions", hi_open=True)
+    if any(not r.contains(f) for f in fr):
+        raise ValueError(f"start fractions {fr} out of range: allowed {r.text('f')} of the drained "
+                         "peak eta")
     # the ranges of dc and path_strain are the vocabulary's terms' (--dc, --path-strain), read
     # from them at each call: written once, in the term (as fem.burst's BurstConfig and
     # dem.burst's BurstOptions read them)

@@ -216,13 +216,19 @@ def cmd_burst(args, stage):
         dyn = burst.Dynamics(args.damping_ratio, args.steps_per_period).validate()
     except ValueError as e:
         raise opt.record_error(e, "Dynamics") from None
-    bad = [f for f in args.start_fractions if f >= 1]
+    # --start-fractions' range with its upper end open (a state below the drained peak); the
+    # parser checked the term's own
+    r = opt.vocabulary_range(burst.RECORD, "start_fractions", hi_open=True)
+    bad = [f for f in args.start_fractions if not r.contains(f)]
     if bad:
-        raise opt.OptionError(f"--start-fractions {bad[0]:g} is out of range: allowed 0 < value < "
-                              "1 (a state below the drained peak)")
-    if args.path_d_eps1 > args.path_strain:
-        raise opt.OptionError(f"--path-d-eps1 {args.path_d_eps1:g} is out of range: allowed 0 < "
-                              f"value <= --path-strain {args.path_strain:g}")
+        raise opt.OptionError(f"--start-fractions {bad[0]:g} is out of range: allowed {r.text()} "
+                              "(a state below the drained peak)")
+    if args.path_d_eps1 > args.path_strain:      # the parser checked the term's range; and:
+        t = opt.VOCABULARY["--path-d-eps1"]
+        r = opt.Range("hmodel.cmd_burst", "path_d_eps1", "real", t.lo, "path_strain", t.lo_open,
+                      False)
+        raise opt.OptionError(f"--path-d-eps1 {args.path_d_eps1:g} is out of range: allowed "
+                              f"{r.text()} {args.path_strain:g}")
     _check_path(args, DOMAIN_EPS1_MAX)
     t0 = _start(args, stage, f"burst: R = {', '.join(f'{R:g}' for R in args.ratios)}, start at "
                 f"{', '.join(f'{f:g}' for f in args.start_fractions)} of the drained peak eta, "

@@ -138,3 +138,19 @@ def test_tightened_tolerances_move_equilibrium_w2_little(biaxial_1000):
             assert a["outcome"] == b["outcome"] == "equilibrium", (a["alpha_sigma"], b["outcome"])
             assert abs(a["w2"] - b["w2"]) < 0.02, (a["alpha_sigma"], a["w2"], b["w2"])
             assert b["steps"] >= a["steps"]
+
+
+def test_max_steps_follows_the_vocabulary_term(monkeypatch):
+    """SettleRule's max_steps range is the vocabulary's --max-steps term's (issue 33)."""
+    import dataclasses
+    import common.options as O
+    term = O.VOCABULARY["--max-steps"]
+    assert O.term_of("SettleRule", "max_steps") is term
+    SettleRule(max_steps=50).validate()
+    with pytest.raises(ValueError, match="max_steps"):
+        SettleRule(max_steps=0).validate()
+    monkeypatch.setitem(O.VOCABULARY, "--max-steps", dataclasses.replace(term, lo=100))
+    with pytest.raises(ValueError, match="max_steps=50; allowed range: max_steps >= 100"):
+        SettleRule(max_steps=50).validate()
+    monkeypatch.setitem(O.VOCABULARY, "--max-steps", dataclasses.replace(term, lo=-5))
+    SettleRule(max_steps=0).validate()

@@ -410,3 +410,33 @@ def test_validate_reads_the_vocabulary_it_writes_no_copy(monkeypatch):
         monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **wide))
         assert refused(**{field: now_in}) is None, name
         monkeypatch.setitem(O.VOCABULARY, name, term)
+
+
+def test_validate_follows_the_terms_of_start_damping_and_steps(monkeypatch):
+    """--start-fractions (its upper end open here: a start below the drained peak),
+    --damping-ratio and --steps-per-period are read from the vocabulary at validate (issue 33):
+    a narrower term refuses a value accepted before, a wider one accepts a value refused before."""
+    import dataclasses
+    import common.options as O
+
+    def refused(**kw):
+        try:
+            BurstConfig(specimen=SMALL_CFG, **kw).validate()
+        except ValueError as e:
+            return str(e)
+        return None
+
+    cases = {"--start-fractions": ("start_fractions", {"lo": 0.5}, (0.3,), {"hi": 2.0}, (1.5,)),
+             "--damping-ratio": ("damping_ratio", {"hi": 0.5}, 0.7, {"hi": 2.0}, 1.5),
+             "--steps-per-period": ("steps_per_period", {"lo": 30}, 20, {"lo": 5}, 8)}
+    for name, (field, narrow, out, wide, now_in) in cases.items():
+        term = O.VOCABULARY[name]
+        assert O.term_of("BurstConfig", field) is term
+        assert refused(**{field: out}) is None and refused(**{field: now_in}), name
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **narrow))
+        msg = refused(**{field: out})
+        assert msg and msg.startswith(f"{name} "), (name, msg)
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **wide))
+        assert refused(**{field: now_in}) is None, name
+        monkeypatch.setitem(O.VOCABULARY, name, term)
+    assert "0 < f < 1" in refused(start_fractions=(1.0,))     # f = 1 refused here, as before

@@ -567,3 +567,51 @@ def test_run_burst_reads_the_vocabulary_it_writes_no_copy(monkeypatch):
         monkeypatch.setitem(O.VOCABULARY, name, term)
     assert "a finite dc >= 0 [Pa]" in refused(dc=-1.0)     # the message's form, as before
     assert "a finite 0 < path_strain < 0.5" in refused(path_strain=0.0)
+
+
+def test_records_follow_the_vocabulary_terms(monkeypatch):
+    """Specimen's width and height, Dynamics' damping ratio and steps per period and run_burst's
+    start fractions (upper end open: below the drained peak) are read from the vocabulary's
+    terms (issue 33): narrower refuses what was accepted, wider accepts what was refused."""
+    import dataclasses
+    import common.options as O
+    import hmodel.burst as hb
+    from hmodel.params import HParams
+
+    class Accepted(Exception):
+        pass
+
+    def stop(*a, **k):
+        raise Accepted
+
+    monkeypatch.setattr(hb, "drained_peak_eta", stop)
+
+    def refused(make):
+        try:
+            make()
+        except Accepted:
+            return None
+        except ValueError as e:
+            return str(e)
+        return None
+
+    cases = [("--width", lambda v: Specimen(width=v).validate(), {"lo": 0.1}, 0.05,
+              {"lo": -1.0}, -0.5),
+             ("--height", lambda v: Specimen(height=v).validate(), {"lo": 0.2}, 0.1,
+              {"lo": -1.0}, -0.5),
+             ("--damping-ratio", lambda v: Dynamics(damping_ratio=v).validate(), {"hi": 0.5},
+              0.7, {"hi": 2.0}, 1.5),
+             ("--steps-per-period", lambda v: Dynamics(steps_per_period=v).validate(),
+              {"lo": 30}, 20.0, {"lo": 5}, 8.0),
+             ("--start-fractions", lambda v: hb.run_burst(HParams(), [-2.0], [v], 100.0),
+              {"lo": 0.5}, 0.3, {"hi": 2.0}, 1.5)]
+    for name, make, narrow, out, wide, now_in in cases:
+        term = O.VOCABULARY[name]
+        assert refused(lambda: make(out)) is None and refused(lambda: make(now_in)), name
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **narrow))
+        assert refused(lambda: make(out)), name
+        monkeypatch.setitem(O.VOCABULARY, name, dataclasses.replace(term, **wide))
+        assert refused(lambda: make(now_in)) is None, name
+        monkeypatch.setitem(O.VOCABULARY, name, term)
+    assert "0 < f < 1" in refused(lambda: hb.run_burst(HParams(), [-2.0], [1.0], 100.0))
+    assert refused(lambda: Dynamics(steps_per_period=20.5).validate()) is None   # a real, as before

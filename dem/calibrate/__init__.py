@@ -24,8 +24,8 @@ relative errors ``dem / hmodel - 1``).  Each parameter set is run on every seed 
 and its figures are the seeds' means; the best set is then run on ``check_seeds``, seeds it was
 not fitted on, and the check's verdict is their mean against the targets (``check_mean``).
 Four seeds each by default (issue 34): one 2000-disk sample scatters about its set's mean by
-about a tolerance (the calibrated set over 16 seeds: one run's sd 4.5 % in peak q, 38 % in
-eps1_95, 3.2 % in the secant, 2.7 % in the dilatancy ratio), and a mean of four halves that, to
+about a tolerance (the calibrated set over 16 seeds: one run's sd 4.9 % in peak q, 48 % in
+eps1_95, 3.2 % in the secant, 3.1 % in the dilatancy ratio), and a mean of four halves that, to
 under half of each tolerance but eps1_95's (docs/dem.md).
 
 Search (``surrogate_search``, deterministic): every varied parameter is mapped onto u in [0, 1]

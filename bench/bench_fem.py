@@ -34,10 +34,10 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from hmodel import HParams, update, broadcast_state          # noqa: E402
-from hmodel.driver import isotropic_state                    # noqa: E402
+from point.driver import isotropic_state                    # noqa: E402
 from fem.biaxial import BiaxialConfig, run_biaxial, format_summary   # noqa: E402
 from fem.__main__ import _fem_kernels, _warm_indicators             # noqa: E402
-from hmodel.experiment import compile_kernels                       # noqa: E402
+from point.experiment import compile_kernels                       # noqa: E402
 
 
 def baseline_rates(params: HParams, npts: int, reps: int = 200, batch_reps: int = 20):

@@ -36,8 +36,8 @@ from fem.burst import _averages                                   # noqa: E402
 from fem.dynamics import Tie, TiedStatic, hold, lowest_mode, mass_matrix   # noqa: E402
 from fem.reference import material_point_curve                    # noqa: E402
 from fem.solver import LoadStepper                                # noqa: E402
-from hmodel.experiment import compile_kernels                     # noqa: E402
-from hmodel.burst_rule import check_columns                        # noqa: E402
+from point.experiment import compile_kernels                     # noqa: E402
+from point.burst_rule import check_columns                        # noqa: E402
 
 
 class Timed:

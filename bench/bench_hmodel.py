@@ -23,7 +23,7 @@ import numpy as np
 
 from hmodel import HParams, _kernels, broadcast_state, update_full
 from hmodel.material import _material_args, kernel_args, to_voigt
-from hmodel.driver import drained_biaxial, isotropic_state, run_path
+from point.driver import drained_biaxial, isotropic_state, run_path
 
 
 def numpy_update_stress(state, d_eps, params):
@@ -149,8 +149,8 @@ def main(argv=None):
     # general route it replaced (every check a full directional_sweep, every block of the path
     # step by step with its states), interleaved in this process; one Numba thread, the CPU
     # time of the process; and where the time goes (both looked up at call time, so wrapped)
-    import hmodel.experiment as ex
-    from hmodel.probes import directional_sweep
+    import point.experiment as ex
+    from point.probes import directional_sweep
 
     def general_signs(st, p, n):
         sw = directional_sweep(st, p, n=n)

@@ -20,7 +20,7 @@ def _zone_stats(w2, micro, plastic):
 def conclusions(h: dict, dem_rows: list | None, fem: dict | None, dem: dict | None = None) -> dict:
     """The paper's section-5 conclusions as numbers, for each model (``dem``: the result of
     ``dem_part``, for its comparison state, domain and the p = (s1 + 2 s2)/3 reading)."""
-    from hmodel.probes import arcs
+    from point.probes import arcs
     sw = h["sweep"]
     c = {"hmodel": {}, "dem": None, "fem": None, "domain": []}
     hm = c["hmodel"]
@@ -90,7 +90,7 @@ def conclusions(h: dict, dem_rows: list | None, fem: dict | None, dem: dict | No
                 p3["below_lower_boundary"] = bool(b["lower_eta"] == b["lower_eta"]
                                                   and p3["eta"] < b["lower_eta"])
     if fem is not None:
-        from hmodel.driver import drained_biaxial, isotropic_state, run_path
+        from point.driver import drained_biaxial, isotropic_state, run_path
         cur = fem["curve"]
         P = fem["params"]
         e1 = np.asarray(cur["eps1"], float)

@@ -39,7 +39,7 @@ def polar_figure(path, h, rows, dem_title="DEM (Fig. 15)"):
 
     from common.io import save_figure
     from common.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes, polar_series
-    from hmodel.probes import arcs
+    from point.probes import arcs
     rmax = 1.6
     sw = h["sweep"]
     cone_h, plastic_h = arcs(sw.alpha_sigma, sw.w2 <= 0), arcs(sw.alpha_sigma, sw.plastic)

@@ -38,8 +38,8 @@ def hmodel_part(eta_a=1.029, sigma2=200e3, alphas=None, domain_sigma2=(100e3, 20
     bifurcation domain. ``params``: the HParams (default Table I with ``n_dir``), at ``sigma2``
     whatever their p0. Returns a dict of arrays (SI, compression positive)."""
     from hmodel import HParams
-    from hmodel.experiment import biaxial_test, bifurcation_domain, state_at_eta
-    from hmodel.probes import directional_sweep, stress_probes
+    from point.experiment import biaxial_test, bifurcation_domain, state_at_eta
+    from point.probes import directional_sweep, stress_probes
 
     P = (HParams(n_dir=n_dir) if params is None else params).replace(p0=sigma2)
     path = biaxial_test(P, sigma2, 1e-5, 0.05)

@@ -14,7 +14,7 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
     """report.md: every figure embedded and the paper's section-5 conclusions in numbers."""
     from common.io import atomic_open
     from dem.domain import eta_lim_text
-    from hmodel.probes import format_arcs
+    from point.probes import format_arcs
     hm, dm, fm = c["hmodel"], c["dem"], c["fem"]
     L = ["# Cross-check: H-model, finite elements and DEM", "",
          f"Configuration: {json.dumps(config)}", "",

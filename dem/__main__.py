@@ -13,7 +13,7 @@ import time
 
 from common import options as opt     # the command-line rules shared by every CLI
 from common.io import atomic_write_bytes, fmt
-from hmodel.burst_rule import RELEASE
+from point.burst_rule import RELEASE
 
 from .params import OPTIONS
 

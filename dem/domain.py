@@ -64,7 +64,7 @@ def target_etas(rows, state):
 
 def state_row(name, meta_row, eta_peak, ref_outcome, rows, state):
     """One row of domain.csv (see DOMAIN_COLUMNS)."""
-    from hmodel.probes import arcs
+    from point.probes import arcs
     s1, s2 = state.control.s_to[1], state.control.s_to[0]
     out = {"state": name, "eta": _eta(s1, s2), "eta_fraction": _eta(s1, s2) / eta_peak,
            "eps1": float(meta_row["eps1"]), "p": 0.5 * (s1 + s2), "q": s1 - s2,
@@ -282,7 +282,7 @@ def hmodel_boundary(sigma2):
     """The H-model's lower boundary (first W2 <= 0 and W2_sigma <= 0) and peak on the drained
     path at ``sigma2`` [Pa] (Table I parameters, p = (s1 + s2)/2)."""
     from hmodel import HParams
-    from hmodel.experiment import bifurcation_domain
+    from point.experiment import bifurcation_domain
     d = bifurcation_domain(HParams(p0=float(sigma2)), [float(sigma2)], workers=1)[0]
     peak = d.q_peak / d.p_peak
     return {"sigma2": float(sigma2), "eta_w2": d.q_w2 / d.p_w2,

@@ -591,7 +591,7 @@ def plot_probes(rows, out_dir, note=""):
     import matplotlib.pyplot as plt
 
     from common.plots import cone_zoom, mark_cone, mark_plastic, needs_zoom, polar_axes
-    from hmodel.probes import arcs
+    from point.probes import arcs
     figs = (("fig15_w2.png", [("w2", r"$W_2$ macro")], r"Normalized second-order work $W_2$"),
             ("fig16_w2_micro.png", [("w2", r"$W_2$ macro"),
                                     ("w2_micro", r"micro $\sum d\mathbf{f}\cdot d\mathbf{l}\,/\,(V|d\sigma||d\varepsilon|)$")],

@@ -11,7 +11,7 @@ import numpy as np
 
 from common import options as opt
 from hmodel import params as hp
-from hmodel.experiment import compile_kernels
+from point.experiment import compile_kernels
 from hmodel.params import ParamError
 
 from .biaxial import MATERIAL, BiaxialConfig, run_biaxial, format_summary

@@ -24,7 +24,7 @@ import numba
 import numpy as np
 
 from hmodel import HParams, broadcast_state, _kernels
-from hmodel.driver import isotropic_state
+from point.driver import isotropic_state
 from hmodel.material import (HState, PARALLEL_MIN_POINTS, check_state, kernel_args, to_voigt,
                              from_voigt, stress_work, _material_args, _refuse_non_finite)
 

@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hmodel.burst_rule import (RELEASE, BurstRule, check_columns, ke_growth, release_columns,
+from point.burst_rule import (RELEASE, BurstRule, check_columns, ke_growth, release_columns,
                                release_ratio)
 from common.io import atomic_write_bytes, fmt, save_figure
 from common.options import vocabulary_range
@@ -42,7 +42,7 @@ from .adapter import stress_to_model, strain_to_model
 from .biaxial import BiaxialConfig, build_problem, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
 from .output import CurveWriter, FieldWriter, cell_tensor, nodal_vector, plot_mode
-from hmodel.burst import CPeak, check_ratio
+from point.burst import CPeak, check_ratio
 
 from .reference import material_point_curve, material_point_path
 from .solver import LoadStepper, StaticLoss

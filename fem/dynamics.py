@@ -35,9 +35,9 @@ import scipy.sparse.linalg as spla
 from skfem import Basis, BilinearForm
 from skfem.helpers import dot
 
-from hmodel.burst import Specimen
-from hmodel.burst_rule import BurstRule, EnergyCheck, decide
-from hmodel.driver import MAX_CUTS
+from point.burst import Specimen
+from point.burst_rule import BurstRule, EnergyCheck, decide
+from point.driver import MAX_CUTS
 from .problem import Biaxial
 from .solver import FreeSolver, NewtonError
 

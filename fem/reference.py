@@ -19,11 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from hmodel import HParams
-from hmodel.driver import (MixedControl, isotropic_state, mixed_step, run_path, drained_biaxial,
+from point.driver import (MixedControl, isotropic_state, mixed_step, run_path, drained_biaxial,
                            stress_invariants)
-from hmodel.burst import CPeak, proportional_path
-from hmodel.experiment import state_at_eta
-from hmodel.material import to_voigt
+from point.burst import CPeak, proportional_path
+from point.experiment import state_at_eta
+from point.tensors import to_voigt
 
 from .indicators import mandel
 

@@ -1,6 +1,6 @@
 """The H-microdirectional material point: state, pure batched update, consistent tangents.
 
-Conventions (spec/hmodel.md): SI units, compression positive, 2x2 tensors with the tensor axes
+Conventions: SI units, compression positive, 2x2 tensors with the tensor axes
 first and any batch axes last, e.g. a strain increment of shape (2, 2, *batch), a tangent of shape
 (2, 2, 2, 2, *batch). Hexagon fields are stored per material point as rows of n_dir orientations:
 shape (*batch, n_dir), so that one point's hexagons are contiguous in memory for the kernel.
@@ -17,6 +17,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+
+from point.tensors import from_voigt, stress_work, tangent_from_voigt, to_voigt
 
 from . import _kernels
 from .params import HParams
@@ -109,43 +111,6 @@ class Increment(NamedTuple):
     w2t: np.ndarray
 
 
-# -- tensor helpers (tensor axes first, batch last) ------------------------------------------
-def to_voigt(t: np.ndarray) -> np.ndarray:
-    """(2, 2, *batch) symmetric tensor -> (npts, 3) rows (11, 22, 12); the 12 entry is the
-    symmetric part (t12 + t21) / 2."""
-    t = np.asarray(t, dtype=float)
-    if t.shape[:2] != (2, 2):
-        raise ValueError(f"expected a tensor of shape (2, 2, *batch), got {t.shape}")
-    out = np.empty((int(np.prod(t.shape[2:], dtype=int)), 3))
-    out[:, 0] = t[0, 0].ravel()
-    out[:, 1] = t[1, 1].ravel()
-    out[:, 2] = 0.5 * (t[0, 1] + t[1, 0]).ravel()
-    return out
-
-
-def from_voigt(v: np.ndarray, batch_shape: tuple) -> np.ndarray:
-    """(npts, 3) rows (11, 22, 12) -> (2, 2, *batch) symmetric tensor."""
-    v = np.asarray(v)
-    t = np.empty((2, 2) + tuple(batch_shape))
-    t[0, 0] = v[:, 0].reshape(batch_shape)
-    t[1, 1] = v[:, 1].reshape(batch_shape)
-    t[0, 1] = t[1, 0] = v[:, 2].reshape(batch_shape)
-    return t
-
-
-_VOIGT_INDEX = np.array([[0, 2], [2, 1]])          # (i, j) -> position in (11, 22, 12)
-_SHEAR_HALF = np.where(_VOIGT_INDEX == 2, 0.5, 1.0)  # d/d eps_kl of a symmetric increment
-
-
-def tangent_from_voigt(T: np.ndarray, batch_shape: tuple) -> np.ndarray:
-    """(npts, 3, 3) d sigma_a / d v_b with v = (e11, e22, e12) -> (2, 2, 2, 2, *batch) with
-    C[i, j, k, l] = d sigma_ij / d eps_kl for a general (non-symmetric) increment, whose
-    symmetric part is what the material sees: C has both minor symmetries."""
-    I = _VOIGT_INDEX
-    C = T[:, I[:, :, None, None], I[None, None, :, :]] * _SHEAR_HALF[None, None, None, :, :]
-    return np.moveaxis(C, 0, -1).reshape((2, 2, 2, 2) + tuple(batch_shape))
-
-
 # -- states ------------------------------------------------------------------------------------
 def reference_state(params: HParams, batch_shape: tuple = ()) -> HState:
     """The zero-force reference: every hexagon with d1 = d2 = 2 r_g, alpha = alpha0."""
@@ -192,19 +157,6 @@ def take_points(state: HState, index) -> HState:
 
 
 # -- the update --------------------------------------------------------------------------------
-def stress_work(old: HState, new: HState, stress0) -> np.ndarray:
-    """(*batch,) internal second-order work per unit volume [J/m^3] of the increment from
-    ``old`` to ``new`` (states of the same points), from the material's own records:
-    ((s_old + s_new) / 2 - ``stress0``) : (eps_new - eps_old), stresses (2, 2, *batch) [Pa] and
-    strains HState.stress / .eps (compression positive both: the product is the work). The
-    trapezoid of the stress along the strain increment, exact for a stress linear in the
-    increment; Eq. 1's W2_int of a held run is its sum from the switch (stress0 the stress
-    there), independent of the internal forces an integrator used
-    (``hmodel.burst_rule.EnergyCheck``)."""
-    ds = 0.5 * (np.asarray(old.stress) + np.asarray(new.stress)) - np.asarray(stress0)
-    return np.einsum("ab...,ab...->...", ds, np.asarray(new.eps) - np.asarray(old.eps))
-
-
 def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = True,
                 parallel: bool | None = None, extras: bool = True) -> Increment:
     """Advance every point by the strain increment ``d_eps`` (2, 2, *batch), compression positive.

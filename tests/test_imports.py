@@ -15,11 +15,14 @@ import ast
 import os
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-PACKAGES = ("common", "hmodel", "fem", "dem", "crosscheck")
+PACKAGES = ("common", "point", "hmodel", "fem", "dem", "crosscheck")
 # the three parts, below the cross-check
 PARTS = ("hmodel", "fem", "dem")
 # the ground floor, below the three parts
 GROUND = "common"
+# the material point of any law, between the ground floor and the parts (the H-model is one law
+# of it: point finds it by name, ``importlib``, and imports no part)
+POINT = "point"
 
 
 def _modules() -> dict[str, str]:
@@ -156,6 +159,16 @@ def test_the_ground_floor_imports_no_part():
     assert not bad, "\n".join(bad)
 
 
+def test_the_material_point_imports_no_part():
+    """point (the contract, the analysis of any law) imports none of hmodel, fem, dem and
+    crosscheck: a law is found by its name (``point.contract.material_named``), the H-model
+    registers itself when hmodel is imported."""
+    graph = import_graph()
+    bad = sorted(f"{m} ({line}) imports {t}" for m, edges in graph.items() for t, line in edges.items()
+                 if m.split(".")[0] == POINT and t.split(".")[0] not in (POINT, GROUND))
+    assert not bad, "\n".join(bad)
+
+
 def test_no_module_sets_the_umask():
     """The umask is the process's, shared by every thread: setting it even for a moment (to read
     it) races with any other thread creating a file. No module of the packages, the benchmarks
@@ -180,12 +193,13 @@ def test_no_module_sets_the_umask():
 def test_the_graph_is_read():
     """The reading itself: relative, absolute and in-function imports, packages and modules."""
     graph = import_graph()
-    assert "hmodel.mixed" in graph["hmodel.driver"]                 # from .mixed import ...
-    assert "hmodel.mixed" in graph["hmodel.controllability"]
+    assert "point.mixed" in graph["point.driver"]                   # from .mixed import ...
+    assert "point.mixed" in graph["point.controllability"]
+    assert "point.driver" in graph["hmodel.driver"]                 # from point import driver
     assert "hmodel.material" in graph["hmodel"]                     # a package's __init__
-    assert "hmodel.driver" in graph["fem.reference"]               # from hmodel.driver import
+    assert "point.driver" in graph["fem.reference"]                # from point.driver import
     assert "fem.indicators" in graph["fem.__main__"]               # from . import indicators as ind
-    assert "hmodel.driver" in graph["hmodel.experiment"]
+    assert "point.driver" in graph["point.experiment"]
     assert "fem.biaxial" in graph["crosscheck.parts"]              # from fem.biaxial import, in a function
     assert "crosscheck.burst.report" in graph["crosscheck.report"]  # from .burst.report import
     assert "common.io" in graph["common.options"]                  # from .io import, in a function

@@ -51,7 +51,7 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
     Returns {part: {"rows": burst rows (dicts), "histories": E_c per volume against time,
     "eta_peak": the part's drained peak eta}}."""
     from hmodel import HParams
-    from hmodel import burst as hb
+    from point import burst as hb
     from fem.biaxial import BiaxialConfig
     from fem.burst import BurstConfig, run_burst as fem_burst
 

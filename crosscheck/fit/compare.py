@@ -15,9 +15,9 @@ import os
 
 import numpy as np
 
-from hmodel.experiment import biaxial_test, domain_point, state_at_eta
+from point.experiment import biaxial_test, domain_point, state_at_eta
 from hmodel.params import HParams
-from hmodel.probes import arcs, directional_sweep, stress_probes
+from point.probes import arcs, directional_sweep, stress_probes
 
 from .report import bracket
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from hmodel.probes import format_arcs
+from point.probes import format_arcs
 
 __all__ = ["markdown", "verdicts", "bracket", "eta_lim_text"]
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from hmodel import fit as hfit
 from hmodel.cli import write_domain, write_fit, write_probes
-from hmodel.experiment import biaxial_test, bifurcation_domain, directional_analysis
+from point.experiment import biaxial_test, bifurcation_domain, directional_analysis
 from hmodel.fit import _jsonable
 from common.io import atomic_open, read_csv, write_csv
 from common.options import Stage

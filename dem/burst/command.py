@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 
-from hmodel.burst import check_ratio
-from hmodel.burst_rule import RELEASE
+from point.burst import check_ratio
+from point.burst_rule import RELEASE
 
 from ..anatomy import contact_state
 from ..simulation import Simulation

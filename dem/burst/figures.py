@@ -7,7 +7,7 @@ import os
 
 import numpy as np
 
-from hmodel.burst_rule import RELEASE
+from point.burst_rule import RELEASE
 
 from .options import SWITCHES
 from .runs import H

@@ -361,7 +361,7 @@ def growth(history, n_disks, ke_tol) -> dict:
     bound: ``ke_end_over_bound``, the backbone E_c at the end over ke_tol x disks. Neither depends
     on the kinetic-energy floor of the start. ``history``: a hold's (HISTORY_COLUMNS from
     "step")."""
-    from hmodel.burst_rule import energy_release
+    from point.burst_rule import energy_release
     h = np.asarray(history, float)
     r = energy_release(h[:, 1], h[:, 8], h[:, H["w2_ext_held"]])
     return {"ke_w2ext_max": r["ratio_max"], "t_release": r["t_release"],

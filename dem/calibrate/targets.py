@@ -108,7 +108,7 @@ def hmodel_curve(confining=200e3, eps_max=0.035, d_eps1=1e-5):
     max(eps_max, HMODEL_EPS_MIN), so that it is past its peak whatever the DEM's eps_max:
     dict of eps1, q, eps_v, p lists."""
     eps_max = max(eps_max, HMODEL_EPS_MIN)
-    from hmodel.driver import MixedControlError, drained_biaxial, isotropic_state, run_path
+    from point.driver import MixedControlError, drained_biaxial, isotropic_state, run_path
     from hmodel.params import HParams
     P = HParams(p0=float(confining))
     n = int(math.ceil(eps_max / d_eps1))

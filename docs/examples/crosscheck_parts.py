@@ -5,7 +5,7 @@ SI units, compression positive. docs/api.md.
 """
 from crosscheck import conclusions, fem_part, hmodel_part
 from hmodel import HParams
-from hmodel.probes import format_arcs
+from point.probes import format_arcs
 
 P = HParams(n_dir=36)              # the H-model and the FE material: Table I, 36 orientations
 h = hmodel_part(params=P, domain_sigma2=())     # path, point A (eta 1.029), sweep; no domain

@@ -3,7 +3,7 @@ d eps2 = R d eps1 from 0.9 of the drained peak, c = s1 + R s2 held just below an
 peak. Table I, 200 kPa, the default homogeneous specimen. docs/api.md.
 """
 from hmodel import HParams
-from hmodel.burst import Dynamics, Specimen, run_burst
+from point.burst import Dynamics, Specimen, run_burst
 
 P = HParams()
 res = run_burst(P, ratios=[-2.0], start_fractions=[0.9], dc=20.0,      # dc [Pa]: the held step

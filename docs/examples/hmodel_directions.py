@@ -6,8 +6,8 @@ Table I, 200 kPa. ``w2`` is the normalized second-order work (Eq. 10 over V |dPi
 import numpy as np
 
 from hmodel import HParams
-from hmodel.experiment import bifurcation_domain, state_at_eta
-from hmodel.probes import arcs, directional_sweep, format_arcs, stress_probes
+from point.experiment import bifurcation_domain, state_at_eta
+from point.probes import arcs, directional_sweep, format_arcs, stress_probes
 
 P = HParams()
 path, state_A = state_at_eta(P, 1.029)           # the drained path to eta = 1.029 and its state

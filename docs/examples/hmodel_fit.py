@@ -3,7 +3,7 @@ itself with phi_g = 25 deg, so the fit must find 25 again. SI units, compression
 docs/api.md.
 """
 from hmodel import HParams
-from hmodel.experiment import biaxial_test
+from point.experiment import biaxial_test
 from hmodel.fit import fit_curve, format_result, make_curve
 
 # the "measured" curve: eps1, q [Pa], eps_v at 200 kPa (read_curve(path) reads one from a CSV)

@@ -5,7 +5,7 @@ Table I, 200 kPa; SI units, compression positive, tensors (11, 22, 12). docs/api
 import numpy as np
 
 from hmodel import HParams, update
-from hmodel.driver import drained_biaxial, isotropic_state, run_path, stress_invariants
+from point.driver import drained_biaxial, isotropic_state, run_path, stress_invariants
 
 P = HParams()                      # Table I (kn, kt [N/m], phi_g, alpha0 [deg], r_g [m], p0 [Pa])
 s0 = isotropic_state(P)            # every hexagon compressed to p0 = 200 kPa

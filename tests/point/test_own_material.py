@@ -1,0 +1,70 @@
+"""The law written as a user would (docs/examples/own_material.py) runs through the toolkit, and
+the probes of a law without the H-model's extras are exact where the law makes them so: the
+hypoplastic increment d sigma = L:d eps + N |d eps| is homogeneous of degree 1 in d eps, so a
+probe of any size gives the rate response itself."""
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from point import check_tangent, material_of
+from point.experiment import biaxial_test, domain_point
+from point.probes import directional_sweep, strain_probes
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def example():
+    spec = importlib.util.spec_from_file_location("own_material", ROOT / "docs/examples/own_material.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def loaded(example):
+    P = example.HypoParams()
+    return P, biaxial_test(P, d_eps1=1e-4, eps1_max=0.01).state
+
+
+def test_the_law_is_found_from_its_record(example):
+    assert material_of(example.HypoParams()).name == "hypoplastic-plane"
+
+
+@pytest.mark.parametrize("d", [(1e-4, -3e-5, 0.0), (-2e-5, 1e-5, 4e-6), (1e-5, 1e-5, 1e-5)])
+def test_its_tangent_agrees_with_its_stress(example, loaded, d):
+    P, s = loaded
+    r = check_tangent(example.HYPOPLASTIC, s, P, np.array([[d[0], d[2]], [d[2], d[1]]]))
+    assert r.ok and r.error < 1e-6, r
+
+
+def test_probes_of_a_law_without_extras_are_its_response(example, loaded):
+    """w2 = d sigma : d eps / (|d sigma| |d eps|) of L:d eps + N |d eps| (exact for this law at
+    any probe size), alpha_sigma = atan2(d sigma1, d sigma2); the H-model's own fields absent."""
+    P, s = loaded
+    a = np.linspace(0.0, 360.0, 37)[:-1]
+    pr = strain_probes(s, P, a, norm=1e-6)
+    law = material_of(P)
+    for k, ak in enumerate(a):
+        de = 1e-6 * np.diag([np.cos(np.radians(ak)), np.sin(np.radians(ak))])
+        ds = law.update(s, de, P)[0] - s.stress
+        w = np.sum(ds * de) / (np.linalg.norm(ds) * np.linalg.norm(de))
+        assert pr.w2[k] == pytest.approx(w, abs=1e-9)
+        assert pr.w2_sigma[k] == pytest.approx(w, abs=1e-9)
+        assert pr.alpha_sigma[k] == pytest.approx(np.degrees(np.arctan2(ds[0, 0], ds[1, 1])) % 360,
+                                                  abs=1e-7)
+    for absent in ("w2_V", "w2_g", "w2n", "w2t", "w2_micro"):
+        assert np.all(np.isnan(getattr(pr, absent)))
+    # the probe's size does not matter for a response homogeneous of degree 1
+    big = strain_probes(s, P, a, norm=1e-3)
+    assert np.allclose(big.w2, pr.w2, atol=1e-9)
+
+
+def test_w2_vanishes_before_the_drained_limit(example):
+    P = example.HypoParams()
+    d = domain_point(P, P.p0, d_eps1=1e-4, eps1_max=0.06, n_dir_probe=180)
+    assert d.q_w2 / d.p_w2 < d.q_peak / d.p_peak - 0.05
+    sw = directional_sweep(biaxial_test(P, d_eps1=1e-4, eps1_max=d.eps1_w2).state, P, n=360)
+    assert np.min(sw.w2) <= 0.0

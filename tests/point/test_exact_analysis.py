@@ -168,6 +168,10 @@ def test_the_c_peak_of_a_proportional_path_is_h_R(R):
     assert cross - 1 <= k <= cross, (k, cross)
     rc = run_path(s0, P, proportional_strain_stress(R, 200.0), 5000, keep_states=True)
     assert rc.end.outcome == "uncontrollable"
+    # for the reason the theory gives: the controlled block dc/d eps1 changes sign there, and
+    # the control's W2 with it (not a flat response, not a jump)
+    v = rc.end.verdict
+    assert v.det[0] * v.det[1] < 0 and v.w2[0] * v.w2[1] < 0, v
     gl = [float(mechanism(P, s).h) - h_path(mechanism(P, s), u) for s in rc.states]
     assert gl[-1] > 0 and all(v > 0 for v in gl)
     # the last static state is within one step of the crossing: the step past it has g <= 0
@@ -182,6 +186,8 @@ def test_drained_controllability_is_lost_at_h_c():
     Ps = DPParams(G=10e6, kappa_p=0.002)
     r = run_path(isotropic_state(Ps), Ps, drained_biaxial(1e-5), 3000, keep_states=True)
     assert r.end.outcome == "uncontrollable"
+    v = r.end.verdict                  # the block d s22 / d eps22 changes sign: W2 = 0 there
+    assert v.det[0] * v.det[1] < 0 and v.w2[0] * v.w2[1] < 0, v
     g = [float(mechanism(Ps, s).h) - h_control(mechanism(Ps, s), (True, False, True))
          for s in r.states if bool(s.plastic)]
     assert all(v > 0 for v in g)
@@ -192,3 +198,31 @@ def test_drained_controllability_is_lost_at_h_c():
     T = [0, 2]
     Ci = np.linalg.inv(np.linalg.inv(m.E)[np.ix_(T, T)])
     assert h_control(m, (True, False, True)) == pytest.approx(float(-m.P[T] @ Ci @ m.Q[T]), rel=1e-12)
+
+
+def test_the_material_point_burst_at_the_exact_c_peak():
+    """The burst of the material point (``point.burst.hold``: the specimen held at c, Newmark,
+    the burst rule) from the state at the exact c peak of the proportional path R = -2 (the
+    strain step from the last row before it bisected to h = h_R, closed form): held 5 Pa below
+    c* it settles, 5 Pa above it fails (no static state past the peak; 5 Pa is the change of c
+    over one path step there, c_peak - c_(peak-1) = 5.4 Pa)."""
+    from point.burst import hold
+    R = -2.0
+    u = (1.0, R, 0.0)
+    _, s0 = state_at_eta(P, 0.95 * 2 * P.mu_p)
+    first, peak = proportional_path(s0, P, R, 1e-5)
+    k = peak.peak
+    before = run_path(s0, P, proportional_strain(1e-5, R), k - 1)
+    g = lambda st: float(mechanism(P, st).h) - h_path(mechanism(P, st), u)     # noqa: E731
+    lo, hi = 0.0, 2e-5                       # the strain step from row k - 1 to the root
+    step = lambda x: run_path(before.state, P, proportional_strain(x, R), 1).state  # noqa: E731
+    assert g(before.state) > 0 and g(step(hi)) < 0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if g(step(mid)) > 0 else (lo, mid)
+    star = step(0.5 * (lo + hi))
+    c_star = float(star.stress[0, 0] + R * star.stress[1, 1])
+    assert c_star >= max(peak.c) - 1e-6 * abs(c_star)        # the exact peak is above every row
+    eps_star = (float(first.eps[k - 1, 0]) + 0.5 * (lo + hi), 0.0)
+    assert hold(star, P, R, c_star - 5.0, eps_star).outcome == "equilibrium"
+    assert hold(star, P, R, c_star + 5.0, eps_star).outcome == "failure"

@@ -6,7 +6,7 @@ linear triangles with one point). The symmetric gradients of the basis functions
 once ("B-matrices", with skfem's ``Basis.dx`` weights), so that the Newton loop works on plain
 arrays: strain = B u, f_int = sum B^T sigma dx, K = sum B^T D B dx (scipy.sparse).
 
-Boundary conditions (spec/fem.md):
+Boundary conditions (docs/fem.md):
 - bottom face y = ymin on rollers: u_y = 0 at every bottom node, u_x = 0 at the one bottom node
   nearest the middle (no rigid translation, no bias to one side);
 - top face y = ymax: smooth rigid platen, u_y = -delta at every top node (driven), u_x free;

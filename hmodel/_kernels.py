@@ -6,7 +6,7 @@ are carried in the state, so a closed hexagon costs no trigonometric call); stra
 are (npts, 3) in the order (11, 22, 12) with tensor (not engineering) shear; tangents are
 (npts, 3, 3) with T[p, a, b] = d sigma_a / d v_b, v = (de11, de22, de12), de12 = de21.
 
-The hexagon solve follows spec/hmodel.md (Eqs. 16-22 of Nicot, Hadda & Darve 2013 with the two
+The hexagon solve follows the formulation of docs/hmodel.md (Eqs. 16-22 of Nicot, Hadda & Darve 2013 with the two
 corrections the spec lists). For a fixed sliding/opening pattern every increment is affine in de,
 so the derivative of the returned stress is assembled exactly, term by term (chain rule through
 the 3x3 solve, the new angle, the new lengths and the volume).

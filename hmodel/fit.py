@@ -5,7 +5,7 @@ compared with the H-model's drained path from the isotropic state at p0 = sigma2
 (``experiment.biaxial_test``); the free parameters are found by weighted least squares
 (``scipy.optimize.least_squares``, trust-region reflective within bounds) from several starts.
 
-What a drained curve can determine (dimensional analysis of the model, spec/hmodel.md): every
+What a drained curve can determine (dimensional analysis of the model, docs/hmodel.md): every
 length of a hexagon scales with r_g, every contact force with kn r_g (N1 = kn (2 r_g - d1), T1
 from kt d1 d alpha), the volume with h r_g^2 (h the slab thickness). The stress (Love-Weber,
 Eq. 23) therefore scales with kn r_g r_g / (h r_g^2) = kn / h, and the drained curve is
@@ -277,7 +277,7 @@ def structural_reduction(free, base: HParams) -> tuple[tuple, dict]:
 
 def groups(params: HParams) -> dict:
     """The combinations a drained curve determines: kn/h [Pa], kt/kn [-], kn/(p0 h) [-]
-    (spec/hmodel.md: about 2500 for Table I), phi_g, alpha0 [deg], p0 [Pa]."""
+    (docs/hmodel.md: about 2500 for Table I), phi_g, alpha0 [deg], p0 [Pa]."""
     return {"kn_over_h": params.kn / params.h, "kt_over_kn": params.kt / params.kn,
             "kn_over_p0h": params.kn / (params.p0 * params.h), "phi_g": params.phi_g,
             "alpha0": params.alpha0, "p0": params.p0}

@@ -162,7 +162,7 @@ def update_full(state: HState, d_eps, params: HParams, allow_sliding: bool = Tru
     """Advance every point by the strain increment ``d_eps`` (2, 2, *batch), compression positive.
 
     Only the symmetric part of ``d_eps`` acts (Eq. 16 sees n.de.n and t.de.t). The sliding /
-    opening pattern is decided by this increment from ``state`` (return rule of spec/hmodel.md).
+    opening pattern is decided by this increment from ``state`` (the return rule of docs/hmodel.md).
     ``allow_sliding=False`` gives the purely elastic response (the Coulomb cap off).
     ``extras=False`` skips the Lagrangian tangent and increment, T3 and the micro sums (their
     fields are then NaN): what ``update`` does, since the material contract needs none of them.

@@ -37,7 +37,7 @@ class HParams:
     r_g : grain radius [m] (Table I: 1e-3).
     alpha0 : initial opening angle of every hexagon [deg], in (30, 90) (Table I: 42.8).
     p0 : isotropic confining stress of the initial state [Pa] (Table I: 200e3).
-    thickness : out-of-plane thickness h of the slab [m]; None means 2 r_g (spec/hmodel.md).
+    thickness : out-of-plane thickness h of the slab [m]; None means 2 r_g (docs/hmodel.md, the formulation).
     n_dir : number of hexagon orientations theta in [0, pi), at least 8.
     fabric_a, fabric_b : fabric omega(theta) = (1 + a cos 2(theta - b)) / n_dir, |a| < 1, b in deg.
     """

@@ -257,7 +257,7 @@ def directional_sweep(state, params, n: int = 360, norm: float = DEFAULT_PROBE_N
     response direction alpha_sigma jumps by more than ``max_gap_deg`` between neighbours.
 
     Near the peak most of the plastic zone (and the instability cone) comes from a window of a few
-    degrees of strain directions (spec/hmodel.md), which a uniform sweep misses. Refinement stops
+    degrees of strain directions (docs/hmodel.md, the formulation), which a uniform sweep misses. Refinement stops
     after ``max_rounds`` bisections of an interval (an interval of 360/n/2**30 deg is a jump of
     the response, not a missed direction). Sorted by alpha_eps in [0, 360).
     """
@@ -436,7 +436,7 @@ def tangent_criteria(state, params, d_eps_dir=(1.0, -1.0),
     """det(M) and det(M_sym) of the 2x2 principal tangent (d sigma1, d sigma2 vs d eps1, d eps2)
     on the sliding pattern of the strain direction ``d_eps_dir`` (e.g. the path's loading
     direction), Cauchy and Lagrangian. M_sym = (M + M^T)/2; det(M_sym) <= 0 is the first loss of
-    positive definiteness, det(M) = 0 the limit state (spec/hmodel.md)."""
+    positive definiteness, det(M) = 0 the limit state (docs/hmodel.md)."""
     _check_state(state)
     d = np.asarray(d_eps_dir, dtype=float)
     d = norm * d / np.linalg.norm(d)

@@ -4,7 +4,7 @@ stress ratio, the comparison state by state and direction by direction, the fit'
 
 Second-order work on both sides: the DEM's is ds.de / (|ds| |de|) of stress probes (Eulerian,
 dem/probes.py); the H-model's is given both as its Lagrangian W2 = dPi:de / (|dPi| |de|) (the
-paper's, spec/hmodel.md) and as ds.de / (|ds| |de|), the DEM's definition (``eulerian_w2``).
+paper's, docs/hmodel.md) and as ds.de / (|ds| |de|), the DEM's definition (``eulerian_w2``).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Second-order work identities (spec/hmodel.md, paper Eqs. 10, 15, 36-38).
+"""Second-order work identities (docs/hmodel.md, paper Eqs. 10, 15, 36-38).
 
 Tolerances: the identities are algebraic, so they hold to round-off. W2 values are normalized by
 V |dPi| |de|; the contact sum adds terms of either sign whose size is up to ~1e3 times the total

@@ -124,18 +124,26 @@ class BiaxialConfig:
                 raise ValueError(f"material = {self.material!r} is out of range: allowed a "
                                  "parameter record of a registered law (HParams, DPParams, ...) "
                                  "or None (the H-model of the HParams fields)") from None
+            self._check_sigma2()
         if self.imp_values is not None and not isinstance(self.imp_values, dict):
             raise ValueError(f"imp_values = {self.imp_values!r} is out of range: allowed a dict "
                              "of parameter fields -> weak values, or None")
         return self
 
+    def _check_sigma2(self):
+        # one confining pressure: a record's p0 is never replaced silently
+        if self.material.p0 != self.sigma2:
+            raise ValueError(f"sigma2 = {self.sigma2!r} is out of range: allowed the material's "
+                             f"p0 = {self.material.p0!r} (the confining pressure is the "
+                             "record's p0: with_params(P) sets both)")
+
     def params(self):
         """The material's parameter record, p0 = sigma2: the HParams of the fields, or
-        ``material`` (with its p0 replaced by sigma2 where they differ)."""
+        ``material`` (whose p0 must be sigma2: ``with_params`` sets both)."""
         if self.material is None:
             return HParams(**{f: getattr(self, c) for c, f in MATERIAL.items()})
-        m = self.material
-        return m if m.p0 == self.sigma2 else m.replace(p0=self.sigma2)
+        self._check_sigma2()
+        return self.material
 
     def law(self):
         """The law of the material (``point.contract.Material``)."""

@@ -25,8 +25,13 @@ What a law may add (``Material.provides`` names it, and the outputs say what is 
 ``"lagrangian"`` (the Lagrangian increment dPi, the transport term T3, the volume: the H-model's
 Eq. 10 W2 and its Eulerian split), ``"micro"`` (the micro sums of Eqs. 36-37), ``"patterns"``
 (the sliding / opening flags of the H-model's hexagons). A law may override ``update_rows``,
-``mixed_step_fast`` and ``path_fast`` with faster code (the H-model's Numba kernels) that must
-give the numbers the generic code gives from ``update``.
+``update_voigt`` (a field of points: the FE's quadrature points), ``mixed_step_fast`` and
+``path_fast`` with faster code (the H-model's Numba kernels) that must give the numbers the
+generic code gives from ``update``; and ``point_fractions`` / ``flags_changed`` (what a field
+records of its points' mechanisms: the H-model's hexagons, by default the plastic flag). The
+class attribute ``tangent_is_rate`` says whether a step's consistent tangent is the rate tangent
+at the state it reaches (the H-model: yes; by default no, and the bifurcation criteria of a field
+are computed from ``rate_tangent``).
 """
 from __future__ import annotations
 

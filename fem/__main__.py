@@ -305,13 +305,10 @@ def read_any_params(path, option: str = "--params"):
     if model == "hmodel":
         return hp.load_params(path, option)
     try:
-        law = material_named(model) if isinstance(model, str) else None
-    except MaterialError:
-        law = None
-    if law is None:
-        from point.contract import MATERIALS, _BUILTIN
-        known = ", ".join(sorted(set(MATERIALS) | set(_BUILTIN)))
-        raise ValueError(f"{option} {path}: model = {json.dumps(model)}: allowed one of {known}")
+        law = material_named(model)
+    except (MaterialError, TypeError) as e:      # "no material named ...: allowed ..."
+        allowed = str(e).split(": ", 1)[-1] if isinstance(e, MaterialError) else "a law's name"
+        raise ValueError(f"{option} {path}: model = {json.dumps(model)}: {allowed}") from None
 
     def build(values):
         try:

@@ -459,6 +459,9 @@ VOCABULARY = {t.name: t for t in (
        fields=("BiaxialConfig.imp_alpha0",)),
     _T("--imp-angle", "angle of the weak band from the horizontal", "deg",
        fields=("BiaxialConfig.imp_angle",)),
+    _T("--imp-values", "weak values of the material's parameters in the weak zone, "
+       "FIELD=VALUE,... (the fields of --params FILE's law, SI units, degrees)", None, "text",
+       fields=("BiaxialConfig.imp_values",)),
     _T("--rtol", "Newton: relative tolerance of the residual", "-",
        fields=("BiaxialConfig.rtol",)),
     _T("--max-iter", "Newton: iterations per load step at most", "-", "int",

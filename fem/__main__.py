@@ -12,9 +12,8 @@ import numpy as np
 from common import options as opt
 from hmodel import params as hp
 from point.experiment import compile_kernels
-from hmodel.params import ParamError
 
-from .biaxial import MATERIAL, BiaxialConfig, run_biaxial, format_summary
+from .biaxial import MATERIAL, BiaxialConfig, run_biaxial, format_summary, record_params
 from .burst import BurstConfig, run_burst
 
 # Numba's OpenMP threads spin-wait after each parallel region of the material update (libgomp's
@@ -32,6 +31,15 @@ POINT_BYTES_PER_DIR = 4 * (10 * 8 + 2)
 # sparse stiffness and its factorizations. Together: 66 kB a point at 180 orientations, as
 # measured (peak RSS of 20 x 40 quads 160 MB above that of 10 x 20)
 POINT_BYTES = 7_000
+# the state of one quadrature point of a law without orientations (Drucker-Prager: strain,
+# stress, plastic strain, kappa, a flag) [bytes], about 4 copies alive as above
+STATE_BYTES = 4 * 14 * 8
+
+# the default of an option that applies to the H-model only (--imp-phi-g, --imp-alpha0): given
+# or not is what refuses it for another law's specimen
+NOT_GIVEN = type("NotGiven", (), {"__repr__": lambda self: "not given"})()
+# the options of the H-model alone, beside its parameters' (hmodel.params.PARAM_OPTIONS)
+HMODEL_ONLY = (("--imp-phi-g", "imp_phi_g"), ("--imp-alpha0", "imp_alpha0"))
 
 
 def _opt_float(s):
@@ -39,6 +47,33 @@ def _opt_float(s):
 
 
 _opt_float.__name__ = "real or none"
+
+
+def _weak_values(text) -> dict:
+    """--imp-values "mu_p=0.5,G=30e6" -> {"mu_p": 0.5, "G": 30e6} (the fields are checked
+    against the specimen's record later)."""
+    out = {}
+    for part in (x.strip() for x in text.split(",")):
+        if not part:
+            continue
+        name, eq, value = part.partition("=")
+        name = name.strip()
+        try:
+            v = float(value)
+        except ValueError:
+            v = None
+        if not (eq and name.isidentifier() and v is not None and np.isfinite(v)):
+            raise ValueError(f"{part!r}: allowed FIELD=VALUE,... with finite values (e.g. "
+                             "mu_p=0.5)")
+        if name in out:
+            raise ValueError(f"{name} is given twice: allowed each field once")
+        out[name] = v
+    if not out:
+        raise ValueError(f"{text!r}: allowed FIELD=VALUE,... (one or more)")
+    return out
+
+
+_weak_values = opt.argtype(_weak_values, "FIELD=VALUE list")
 
 
 def _specimen_options(sub, d: BiaxialConfig, eps1_max: bool):
@@ -61,13 +96,18 @@ def _specimen_options(sub, d: BiaxialConfig, eps1_max: bool):
     add(g, "--d-eps1", d.d_eps1, record=BC,
         note="" if eps1_max else "of the drained path to the start states")
     add(g, "--sigma2", record="HParams", default_text="the p0 of --params FILE, else 200e3")
-    hp.add_param_options(sub)
+    hp.add_param_options(sub, file_note="of any law (its \"model\": hmodel, drucker-prager): "
+                         "python -m hmodel params --out FILE writes the H-model's; the H-model's "
+                         "options below apply to an H-model file only")
     g = sub.add_argument_group("imperfection")
     add(g, "--imperfection", "none", record=BC, choices=["none", "spot", "band"])
     add(g, "--imp-size", d.imp_size, record=BC)
-    add(g, "--imp-phi-g", d.imp_phi_g, record=BC, parse=_opt_float)
-    add(g, "--imp-alpha0", d.imp_alpha0, record=BC, parse=_opt_float,
-        default_text="none (the specimen's)")
+    add(g, "--imp-values", record=BC, parse=_weak_values,
+        default_text="none (for the H-model: --imp-phi-g, --imp-alpha0)")
+    add(g, "--imp-phi-g", NOT_GIVEN, record=BC, parse=_opt_float,
+        default_text=f"{d.imp_phi_g:g} (H-model only)")
+    add(g, "--imp-alpha0", NOT_GIVEN, record=BC, parse=_opt_float,
+        default_text="none (the specimen's; H-model only)")
     add(g, "--imp-angle", d.imp_angle, record=BC)
     g = sub.add_argument_group("solver and output")
     add(g, "--rtol", d.rtol, record=BC)
@@ -76,8 +116,9 @@ def _specimen_options(sub, d: BiaxialConfig, eps1_max: bool):
     return g
 
 
-DESCRIPTION = """The plane-strain FE biaxial specimen (scikit-fem) with the H-model at every
-quadrature point. python -m fem COMMAND --help lists a command's options, each with its unit and
+DESCRIPTION = """The plane-strain FE biaxial specimen (scikit-fem) with a material of any law at
+every quadrature point (the H-model by default; --params FILE of another law, e.g.
+drucker-prager). python -m fem COMMAND --help lists a command's options, each with its unit and
 default. --out is required: a folder that records the command that wrote it (command.json);
 another command refuses that folder unless --force."""
 
@@ -125,10 +166,22 @@ def _burst_parser(sub):
     opt.add_quiet(g)
 
 
+def _param_error(e, cfg: BiaxialConfig, options=None):
+    """The OptionError of a parameter record's ParamError ``e`` (any law): the H-model's names
+    its option (``hp.param_option_error``); another law's p0 is --sigma2, its other fields come
+    from --params FILE (``options``: a field's option where one sets it)."""
+    if cfg.is_hmodel():
+        return hp.param_option_error(e, options)
+    opt_name = (options or {}).get(e.name) or ("--sigma2" if e.name == "p0" else
+                                              f"--params ({e.name})")
+    return opt.OptionError(f"{opt_name} {e.value!r} is out of range: allowed {e.allowed}")
+
+
 def check_config(cfg: BiaxialConfig) -> None:
     """Everything ``run_biaxial`` would refuse, refused here first as an OptionError naming the
     command-line option: the material (--sigma2 for p0) and weak-zone parameters, the mesh file
     (missing, unreadable, no cells, bad elements) and the memory the run would need."""
+    from point.contract import ParamError as LawParamError
     from .mesh import from_file
     from .problem import Imperfection
     try:
@@ -137,16 +190,28 @@ def check_config(cfg: BiaxialConfig) -> None:
         raise opt.record_error(e, "BiaxialConfig") from None
     try:
         base = cfg.params()
-    except ParamError as e:
-        raise hp.param_option_error(e) from None
+    except (hp.ParamError, LawParamError) as e:
+        raise _param_error(e, cfg) from None
     if cfg.imperfection is not None:
+        weak = cfg.weak_values()
+        what = (f"--imp-values {','.join(f'{k}={v:g}' for k, v in (cfg.imp_values or {}).items())}"
+                if cfg.imp_values else "--imp-phi-g / --imp-alpha0")
+        if not weak:
+            raise opt.OptionError(
+                f"--imperfection {cfg.imperfection}: no weak value: allowed --imp-values "
+                "FIELD=VALUE,..." + (" (or --imp-phi-g, --imp-alpha0)" if cfg.is_hmodel() else
+                                     f" of the {cfg.law().name} specimen's fields"))
         try:
-            Imperfection(kind=cfg.imperfection, size=cfg.imp_size, phi_g=cfg.imp_phi_g,
-                         alpha0=cfg.imp_alpha0, angle=cfg.imp_angle).params(base)
-        except ParamError as e:
-            raise hp.param_option_error(e, {"phi_g": "--imp-phi-g", "alpha0": "--imp-alpha0"}) from None
+            Imperfection(kind=cfg.imperfection, size=cfg.imp_size, phi_g=None, alpha0=None,
+                         values=weak, angle=cfg.imp_angle).params(base)
+        except (hp.ParamError, LawParamError) as e:
+            option = {"phi_g": "--imp-phi-g", "alpha0": "--imp-alpha0"} if cfg.is_hmodel() else {}
+            if cfg.imp_values and e.name in cfg.imp_values:
+                option = {e.name: f"--imp-values {e.name}="}
+            raise _param_error(e, cfg, option) from None
         except ValueError as e:
-            raise opt.OptionError(f"--imperfection {cfg.imperfection}: {e}") from None
+            raise opt.OptionError(f"--imperfection {cfg.imperfection} ({what}): {e}") from None
+    hmodel = cfg.is_hmodel()
     if cfg.mesh_file:
         opt.check_file(cfg.mesh_file, "--mesh-file", "a triangle or quadrilateral mesh file "
                        "meshio can read")
@@ -154,23 +219,28 @@ def check_config(cfg: BiaxialConfig) -> None:
             mesh = from_file(cfg.mesh_file)
         except ValueError as e:
             raise opt.OptionError(f"--mesh-file {cfg.mesh_file}: {e}") from None
-        npts, options = mesh.t.shape[1] * (4 if mesh.t.shape[0] == 4 else 1), "--mesh-file / --n-dir"
+        npts, options = mesh.t.shape[1] * (4 if mesh.t.shape[0] == 4 else 1), "--mesh-file"
     else:
-        npts, options = cfg.nx * cfg.ny * (4 if cfg.mesh_kind == "quad" else 2), "--nx / --ny / --n-dir"
-    opt.check_memory(npts * (base.n_dir * POINT_BYTES_PER_DIR + POINT_BYTES),
-                     f"{npts:.3g} quadrature points of {base.n_dir} orientations", options,
-                     f"fewer cells or orientations ({options})")
+        npts, options = cfg.nx * cfg.ny * (4 if cfg.mesh_kind == "quad" else 2), "--nx / --ny"
+    if hmodel:
+        options += " / --n-dir"
+        per_point, what = base.n_dir * POINT_BYTES_PER_DIR, f" of {base.n_dir} orientations"
+    else:
+        per_point, what = STATE_BYTES, f" of {cfg.law().name}"
+    opt.check_memory(npts * (per_point + POINT_BYTES), f"{npts:.3g} quadrature points{what}",
+                     options, f"fewer cells{' or orientations' if hmodel else ''} ({options})")
 
 
-def _warm_specimen():
-    """Compile the specimen's kernels on tiny cases: the adapter's flag counts (and hmodel's
-    update kernel through it, both drivers) on 70 and 4 points of 8 orientations, the stiffness
-    on one element."""
+def _warm_specimen(params=None):
+    """Compile the specimen's kernels on tiny cases: the material field's update through its
+    law (the H-model's flag counts and update kernel, both drivers, on 70 and 4 points of 8
+    orientations; ``params``: another law's record, which has none), the stiffness on one
+    element."""
     from hmodel import HParams
     from .adapter import MaterialField
     from .mesh import rectangle
     from .problem import Biaxial
-    p = HParams(n_dir=8)
+    p = HParams(n_dir=8) if params is None or isinstance(params, HParams) else params
     for n in (70, 4):
         mf = MaterialField(n, [(p, np.arange(n))])
         t = mf.trial(np.zeros((2, 2, n)))
@@ -178,11 +248,12 @@ def _warm_specimen():
     Biaxial(rectangle(1.0, 1.0, 1, 1), p).stiffness(t.D)       # 1 quad: the 4 points of t
 
 
-def _warm_indicators():
-    """Compile fem's own kernels on tiny cases: the specimen's (``_warm_specimen``), the local
-    indicators on one elastic point, the global check's banded kernels on 2 x 4 elements and
-    the permutation parity of its fallback (det K by LU when K_d is singular: without it that
-    kernel stayed uncompiled and every run announced a compilation)."""
+def _warm_indicators(params=None):
+    """Compile fem's own kernels on tiny cases: the specimen's (``_warm_specimen`` of
+    ``params``' law, default the H-model), the local indicators on one elastic point, the
+    global check's banded kernels on 2 x 4 elements and the permutation parity of its fallback
+    (det K by LU when K_d is singular: without it that kernel stayed uncompiled and every run
+    announced a compilation)."""
     from hmodel import HParams
     from .indicators import GlobalCheck, local_indicators, permutation_parity
     from .mesh import rectangle
@@ -192,8 +263,9 @@ def _warm_indicators():
          + np.einsum("il,jk->ijkl", I, I))[..., None] * 1e6
     local_indicators(D, n_sphere=8)
     permutation_parity(np.arange(2))
-    _warm_specimen()
-    b = Biaxial(rectangle(1.0, 2.0, 2, 4), HParams(n_dir=8))
+    _warm_specimen(params)
+    p = HParams(n_dir=8) if params is None or isinstance(params, HParams) else params
+    b = Biaxial(rectangle(1.0, 2.0, 2, 4), p)
     GlobalCheck(b)(b.stiffness(D[..., [0] * b.npts]))
 
 
@@ -214,14 +286,72 @@ def main(argv=None) -> int:
     return opt.run_cli(build_parser(), argv, _run)
 
 
+def read_any_params(path, option: str = "--params"):
+    """The parameter record of the file ``path`` of any registered law: its "model" names the
+    law (a file without it is the H-model's, as files were before the key), read strictly by
+    ``common.paramfile.read_params`` with that law's record and units (the H-model's by
+    ``hmodel.params.load_params``). ValueError of one line naming the file and the key."""
+    import json
+    from common.paramfile import read_params
+    from point.contract import MaterialError, ParamError, material_named
+    model = "hmodel"
+    try:
+        with open(path) as f:
+            doc = json.load(f)
+        if isinstance(doc, dict) and "model" in doc:
+            model = doc["model"]
+    except (OSError, ValueError):
+        pass                     # read_params says what is wrong with the file
+    if model == "hmodel":
+        return hp.load_params(path, option)
+    try:
+        law = material_named(model)
+    except (MaterialError, TypeError) as e:      # "no material named ...: allowed ..."
+        allowed = str(e).split(": ", 1)[-1] if isinstance(e, MaterialError) else "a law's name"
+        raise ValueError(f"{option} {path}: model = {json.dumps(model)}: {allowed}") from None
+
+    def build(values):
+        try:
+            return law.params_type(**values)
+        except ParamError as e:
+            raise ValueError(f"{e.name} = {e.value!r} is out of range: allowed {e.allowed}") from None
+    return read_params(path, law.params_type, law.name, law.units, build, option)
+
+
 def _specimen_config(args) -> BiaxialConfig:
-    """The specimen of a command: its options, the material from --params FILE (or Table I) with
-    the options given on top (``hmodel.params.params_from``, which sets args.params_note)."""
-    P = hp.params_from(args)
+    """The specimen of a command: its options, the material from --params FILE of any law (or
+    Table I) with the options given on top (the H-model's: ``hmodel.params.params_from``;
+    another law's: --sigma2 alone, its H-model options refused in one line); sets
+    args.params_note."""
+    from common.paramfile import override
+    from point.contract import ParamError, material_of
+    path = getattr(args, "params", None)
+    base = read_any_params(path) if path else None
     kw = {k: v for k, v in vars(args).items()
           if k in BiaxialConfig.__dataclass_fields__ and k not in MATERIAL}
     if kw["imperfection"] == "none":
         kw["imperfection"] = None
+    if base is None or isinstance(base, hp.HParams):
+        for option, name in HMODEL_ONLY:
+            if kw[name] is NOT_GIVEN:
+                kw[name] = BiaxialConfig.__dataclass_fields__[name].default
+        return BiaxialConfig(**kw).with_params(hp.params_from(args, base=base))
+    law = material_of(base)
+    given = [o for o, n in hp.PARAM_OPTIONS + HMODEL_ONLY
+             if getattr(args, n, None) is not None and getattr(args, n) is not NOT_GIVEN]
+    if given:
+        fields = ", ".join(f for f in base.__dataclass_fields__ if not f.startswith("_"))
+        raise opt.OptionError(f"{given[0]} is an option of the H-model: --params {path} is a "
+                              f"{law.name} file (its fields {fields}; --sigma2 sets p0, "
+                              "--imp-values the weak zone's)")
+    for option, name in HMODEL_ONLY:
+        kw[name] = None
+    s2 = getattr(args, "sigma2", None)
+    extra = [("--sigma2", "p0", float(s2))] if isinstance(s2, (int, float)) else []
+    try:
+        P, args.params_note = override(base, extra, f"the file {path}", base.replace)
+    except ParamError as e:
+        raise opt.OptionError(f"--sigma2 {e.value!r} is out of range: allowed {e.allowed}") from None
     return BiaxialConfig(**kw).with_params(P)
 
 
@@ -231,7 +361,9 @@ def _run(args, stage) -> int:
     cfg = _specimen_config(args)
     check_config(cfg)
     opt.check_out_dir(args.out)
-    compile_kernels(extra=_fem_kernels(), warm=_warm_indicators)
+    P = cfg.params()
+    compile_kernels(extra=_fem_kernels(), warm=lambda: _warm_indicators(P),
+                    material=cfg.law())
 
     def progress(line):
         if line.startswith("step") and not stage.written:
@@ -250,9 +382,11 @@ def _run(args, stage) -> int:
         r = getattr(e, "result", None)
         if r is not None:
             print(f"{r.timings['steps']} converged steps are in {args.out}", file=sys.stderr)
+            print(f"material: {r.summary['material']['name']}")
             print(format_summary(r.summary))
         return 1
     print(args.params_note)
+    print(f"material: {res.summary['material']['name']}")
     print(format_summary(res.summary))
     end = res.summary.get("end")
     print(f"outcome: {end['line'] if end else 'complete'}")
@@ -291,7 +425,9 @@ def _run_burst(args, stage) -> int:
     cfg.validate()
     check_config(spec)
     opt.check_out_dir(args.out)
-    compile_kernels(extra=_fem_kernels(indicators=False), warm=_warm_specimen)
+    P = spec.params()
+    compile_kernels(extra=_fem_kernels(indicators=False), warm=lambda: _warm_specimen(P),
+                    material=spec.law())
 
     def progress(line):
         if not stage.written and line.startswith("drained path: start"):
@@ -302,13 +438,14 @@ def _run_burst(args, stage) -> int:
 
     stage.at("set-up of the specimen")
     os.makedirs(args.out, exist_ok=True)
-    stage.wrote(hp.record_params(args.out, spec.params(), f"python -m fem burst; {args.params_note}"))
+    stage.wrote(record_params(args.out, spec.params(), f"python -m fem burst; {args.params_note}"))
     try:
         res = run_burst(cfg, args.out, progress=progress)
     except RuntimeError as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
     print(args.params_note)
+    print(f"material: {res.summary['material']['name']}")
     print(format_burst(res.rows))
     t = res.summary["timings"]
     print(f"{len(res.rows)} runs, {t['total']:.1f} s total (drained path {t['drained']:.1f} s, "

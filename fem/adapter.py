@@ -13,20 +13,20 @@ material sees its axis 1 along the specimen axis whatever its fabric.
 
 ``MaterialField`` holds the state of every quadrature point (flat batch of ``npts`` points in
 the (element, quadrature point) C order of skfem's ``Basis.dx``), possibly split into groups with
-different parameters (the imperfection), and gives trial updates that are committed only when
-the global Newton iteration has converged.
+different parameters (the imperfection), all of one law of the material contract
+(``point.contract``: the H-model, the Drucker-Prager, a user's), and gives trial updates that are
+committed only when the global Newton iteration has converged. It calls the law through the
+contract only (``Material.update_voigt``, ``point_fractions``, ``flags_changed``,
+``rate_tangent``): a law's fast path (the H-model's kernel) lives behind it.
 """
 from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
-import numba
 import numpy as np
 
-from hmodel import HParams, broadcast_state, _kernels
-from point.driver import isotropic_state
-from hmodel.material import (HState, PARALLEL_MIN_POINTS, check_state, kernel_args, to_voigt,
-                             from_voigt, stress_work, _material_args, _refuse_non_finite)
+from point.contract import material_of
+from point.tensors import stress_work, to_voigt
 
 __all__ = ["strain_to_model", "stress_to_fe", "tangent_to_fe", "MaterialField", "Trial"]
 
@@ -77,78 +77,61 @@ def _stress_fe_from_kernel(sig: np.ndarray, out: np.ndarray) -> None:
     out[1, 0] = -sig[:, 2]
 
 
-@numba.njit(cache=True)
-def _row_fractions(flags):
-    """(npts,) fraction of the True flags of each row of (npts, n_dir) bools: the integer count
-    / n_dir, the value (and bits) of flags.mean(axis=-1), without numpy's conversion of the
-    flags to numbers."""
-    npts, n = flags.shape
-    out = np.empty(npts)
-    for p in range(npts):
-        c = 0
-        for i in range(n):
-            c += flags[p, i]
-        out[p] = c / n
-    return out
-
-
-@numba.njit(cache=True)
-def _n_differ(a, b):
-    """Number of entries where two bool arrays of the same shape differ."""
-    x = a.ravel()
-    y = b.ravel()
-    c = 0
-    for i in range(x.size):
-        c += x[i] != y[i]
-    return c
-
-
 class Trial(NamedTuple):
     """A trial update of every point (nothing committed).
 
-    sigma : (2, 2, npts) FE stress [Pa]; D : (2, 2, 2, 2, npts) FE tangent [Pa];
-    states : one new HState per group (their sliding / is_open flags are the pattern, compared
-    between Newton iterates by MaterialField.pattern_changes); sliding, opened : (npts,) fractions
-    of hexagons sliding / open at each point.
+    sigma : (2, 2, npts) FE stress [Pa]; D : (2, 2, 2, 2, npts) FE tangent [Pa], consistent with
+    sigma (what Newton needs); states : one new state per group (its law's flags are the
+    pattern, compared between Newton iterates by MaterialField.pattern_changes); sliding :
+    (npts,) the fraction of each point's mechanisms that slid (H-model: hexagons; a law without
+    patterns: 1.0 where the step loaded the point); opened : (npts,) the fraction of open
+    hexagons, None for a law without patterns; d_eps : (2, 2, npts) the FE strain increment
+    from the committed states (the step's direction, for ``MaterialField.rate_tangent``).
     """
 
     sigma: np.ndarray
     D: np.ndarray
     states: list
     sliding: np.ndarray
-    opened: np.ndarray
+    opened: np.ndarray | None
+    d_eps: np.ndarray
 
 
 class MaterialField:
-    """H-model states of ``npts`` points split into groups of (params, point indices).
+    """States of ``npts`` points of one law, split into groups of (params, point indices).
 
-    groups : sequence of (HParams, index array); the indices partition range(npts). Each group
-    starts in the isotropic state of its own parameters (same p0 for all, so the initial stress is
-    uniform and the specimen starts in equilibrium).
-    allow_sliding : False gives the purely elastic material (tests of Newton convergence).
+    groups : sequence of (parameter record, index array), all records of one law
+    (``point.material_of``); the indices partition range(npts). Each group starts in the
+    isotropic state of its own parameters (``Material.initial_state``; the same p0 for all, so
+    the initial stress is uniform and the specimen starts in equilibrium).
+    allow_sliding : False gives the purely elastic material (``Material.elastic_update``: tests of
+    Newton convergence).
     """
 
     def __init__(self, npts: int, groups: Sequence, allow_sliding: bool = True):
         self.npts = int(npts)
         seen = np.zeros(self.npts, dtype=int)
         self.groups = []
-        p0 = None
+        p0 = law = None
         for params, idx in groups:
             idx = np.asarray(idx, dtype=np.int64)
             if idx.size == 0:
                 continue
             seen[idx] += 1
-            if p0 is None:
-                p0 = params.p0
+            m = material_of(params)
+            if law is None:
+                law, p0 = m, params.p0
+            elif m is not law:
+                raise ValueError(f"the material groups must be of one law: got {law.name} and "
+                                 f"{m.name}")
             elif params.p0 != p0:
                 raise ValueError("all material groups must share p0 (uniform initial stress)")
             self.groups.append((params, idx))
         if np.any(seen != 1):
             raise ValueError("material groups must partition the quadrature points exactly once")
+        self.law = law
         self.allow_sliding = bool(allow_sliding)
-        self.states = [broadcast_state(isotropic_state(params), (idx.size,))
-                       for params, idx in self.groups]
-        self.n_dir = {params.n_dir for params, _ in self.groups}
+        self.states = [law.initial_state(params, (idx.size,)) for params, idx in self.groups]
 
     def stress(self, states=None) -> np.ndarray:
         """(2, 2, npts) FE stress [Pa] of the committed (or given) states."""
@@ -160,17 +143,14 @@ class MaterialField:
 
     def trial(self, d_eps_fe: np.ndarray, elastic: bool = False) -> Trial:
         """Update every point from the committed state by the FE strain increment
-        ``d_eps_fe`` (2, 2, npts) (the total increment of the load step: the sliding pattern of
-        the H-model is decided by the increment from the committed state). ``elastic``: with
-        sliding prevented (the elastic tangent of the state, e.g. for its lowest period).
+        ``d_eps_fe`` (2, 2, npts) (the total increment of the load step: a law with a history,
+        the H-model's sliding pattern, decides it from the increment from the committed state).
+        ``elastic``: the purely elastic response (sliding prevented: the elastic tangent of the
+        state, e.g. for its lowest period).
 
-        The same update as ``hmodel.update_full(state, d_eps, params, extras=False)`` (same
-        checks, the same bits), by hmodel's kernel called here directly; the FE stress and tangent
-        are gathered from the kernel's outputs at once (no Lagrangian tangent, increment or T3
-        conversions the FE never reads). The outputs are new arrays at every call, as in
-        ``update_full``: pooled buffers saved a few page faults but changed how the process's
-        heap serves other large arrays (the benchmark's batch baseline, interleaved with the run,
-        then took ~4500 page faults a call and twice the time)."""
+        Each group is one call of its law's ``update_voigt`` (the H-model: its kernel, the same
+        checks and bits as ``hmodel.update_full(..., extras=False)``); the FE stress and tangent
+        are gathered from the returned rows at once."""
         d_eps_fe = np.asarray(d_eps_fe, dtype=float).reshape(2, 2, self.npts)
         if not np.all(np.isfinite(d_eps_fe)):
             raise ValueError("d_eps contains non-finite values (nan or inf)")
@@ -181,9 +161,11 @@ class MaterialField:
         sliding = np.empty(self.npts)
         opened = np.empty(self.npts)
         states = []
-        for g, ((params, idx), st) in enumerate(zip(self.groups, self.states)):
+        law = self.law
+        plain = not (self.allow_sliding and not elastic)
+        for (params, idx), st in zip(self.groups, self.states):
             de = to_voigt(de_m if one else de_m[:, :, idx])
-            ns, sig, tan = self._update(g, params, st, de, self.allow_sliding and not elastic)
+            ns, sig, tan = law.update_voigt(st, de, params, elastic=plain)
             if one:
                 _stress_fe_from_kernel(sig, sigma)
                 D = _tangent_fe_from_kernel(tan)
@@ -192,56 +174,62 @@ class MaterialField:
                 _stress_fe_from_kernel(sig, s_g)
                 sigma[:, :, idx] = s_g
                 D[..., idx] = _tangent_fe_from_kernel(tan)
-            sliding[idx] = _row_fractions(ns.sliding)
-            opened[idx] = _row_fractions(ns.is_open)
+            sl, op = law.point_fractions(ns)
+            sliding[idx] = sl
+            if op is None:
+                opened = None
+            else:
+                opened[idx] = op
             states.append(ns)
-        return Trial(sigma, D, states, sliding, opened)
+        return Trial(sigma, D, states, sliding, opened, d_eps_fe)
 
-    def _update(self, g: int, params: HParams, st: HState, de: np.ndarray, allow_sliding: bool):
-        """(new state, kernel stress (n, 3), kernel tangent (n, 3, 3)) of group ``g`` for the
-        material strain increment ``de`` (n, 3) (11, 22, 12): hmodel.update_full's steps."""
-        check_state(st, params)
-        args = kernel_args(st, params)          # 10 hexagon fields, was_open, eps, V0, eps
-        npts, ndir = args[0].shape
-        out = _kernels.allocate_outputs(npts, ndir)
-        kern = _kernels.update_parallel if npts >= PARALLEL_MIN_POINTS else _kernels.update_serial
-        kern(*args[:-1], de, *_material_args(params), allow_sliding, False, *out)
-        sig, tan = out[12], out[13]
-        if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
-            _refuse_non_finite(st)
-        batch = st.batch_shape
-        ns = HState(*out[:10], eps=st.eps + from_voigt(de, batch), stress=from_voigt(sig, batch),
-                    V0=np.array(st.V0, dtype=float), sliding=out[10], is_open=out[11],
-                    params_key=st.params_key)
-        return ns, sig, tan
+    def rate_tangent(self, trial: Trial) -> np.ndarray:
+        """(2, 2, 2, 2, npts) FE tangent [Pa] of the rate problem at the trial's states, on the
+        branch the trial's increment selects: what the bifurcation criteria of a converged step
+        are about. For a law whose step tangent is its rate tangent (``Material.tangent_is_rate``:
+        the H-model) the trial's D itself (the same array: the same bits); otherwise the law's
+        ``rate_tangent(new state, step increment, params)`` of every group (Drucker-Prager:
+        D = E - (E:Q)(P:E)/(h + P:E:Q) where the point loaded, E elsewhere)."""
+        if self.law.tangent_is_rate:
+            return trial.D
+        de_m = strain_to_model(trial.d_eps)
+        D = np.empty((2, 2, 2, 2, self.npts))
+        for (params, idx), st in zip(self.groups, trial.states):
+            D[..., idx] = tangent_to_fe(self.law.rate_tangent(st, de_m[:, :, idx], params))
+        return D
 
     def stress_work(self, new_states, ref_states, weights: np.ndarray) -> float:
         """sum_p weights_p ((s_p + s'_p) / 2 - s0_p) : (e'_p - e_p) [J/m for weights dx in
         m^2, per unit thickness]: the internal second-order work of the increment from the
         committed states (stress s, strain e) to ``new_states`` (a trial's), s0 the stress of
         ``ref_states``, from the material's own stress and strain records
-        (``hmodel.material.stress_work``), not from nodal forces. weights : (npts,)."""
+        (``point.tensors.stress_work``), not from nodal forces. weights : (npts,)."""
         w = np.asarray(weights, float)
         return float(sum(np.sum(w[idx] * stress_work(old, new, ref.stress))
                          for (_, idx), old, new, ref in zip(self.groups, self.states, new_states,
                                                             ref_states)))
 
     def fractions(self) -> tuple:
-        """(sliding, opened): (npts,) fractions of the hexagons of each point that slid / are open
-        in the committed state (the pattern of the last converged step)."""
+        """(sliding, opened): (npts,) fractions of each point's mechanisms that slid / are open
+        in the committed state (the pattern of the last converged step; ``Trial``); opened None
+        for a law without patterns."""
         sliding = np.empty(self.npts)
         opened = np.empty(self.npts)
         for (params, idx), st in zip(self.groups, self.states):
-            sliding[idx] = st.sliding.mean(axis=-1)
-            opened[idx] = st.is_open.mean(axis=-1)
+            sl, op = self.law.point_fractions(st)
+            sliding[idx] = sl
+            if op is None:
+                opened = None
+            else:
+                opened[idx] = op
         return sliding, opened
 
     def commit(self, trial: Trial) -> None:
         self.states = list(trial.states)
 
-    @staticmethod
-    def pattern_changes(a: Trial, b: Trial) -> int:
-        """Number of hexagons whose sliding or opening flag differs between two trials (a Newton
-        iteration where this is non-zero is not expected to converge quadratically)."""
-        return int(sum(_n_differ(x.sliding, y.sliding) + _n_differ(x.is_open, y.is_open)
-                       for x, y in zip(a.states, b.states)))
+    def pattern_changes(self, a: Trial, b: Trial) -> int:
+        """Number of mechanism flags that differ between two trials (the law's
+        ``flags_changed``: H-model hexagons whose sliding or opening flag differs; a law
+        without patterns, points whose plastic flag differs). A Newton iteration where this is
+        non-zero is not expected to converge quadratically."""
+        return int(sum(self.law.flags_changed(x, y) for x, y in zip(a.states, b.states)))

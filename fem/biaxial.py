@@ -17,11 +17,13 @@ import numpy as np
 
 from hmodel import HParams
 from common.io import atomic_write_bytes
+from point.contract import MaterialError, material_of
 
 from .adapter import stress_to_model, strain_to_model
 from .indicators import GlobalCheck, GlobalCheckProcess, global_w2, local_indicators
 from .mesh import _count, rectangle, from_file
-from hmodel.params import record_params
+from hmodel.params import record_params as record_hmodel_params
+from common.paramfile import write_params
 
 from .output import (CurveWriter, FieldWriter, plot_curve, first_events, cell_tensor, nodal_vector,
                      mode_fields, plot_mode)
@@ -41,10 +43,13 @@ class BiaxialConfig:
     """Every option of a biaxial run (SI units, angles in degrees, compression positive).
 
     width, height [m]; nx, ny cells; mesh_kind "quad" | "tri"; mesh_file (meshio-readable,
-    overrides the generated mesh); eps1_max final axial strain; d_eps1 nominal step; material
-    parameters, every HParams field (sigma2 is the confining pressure = the material's p0;
-    ``params()``, ``with_params(P)``); imperfection None |
-    "spot" | "band" with imp_size (fraction of the width), imp_phi_g, imp_alpha0 (weak values),
+    overrides the generated mesh); eps1_max final axial strain; d_eps1 nominal step; the
+    material: the H-model of the HParams fields below (kn ... fabric_b), or ``material``, a
+    parameter record of any law of the contract (``point.material_of``: DPParams, ...), which
+    then replaces those fields; sigma2 is the confining pressure = the material's p0 either way
+    (``params()``, ``with_params(P)``, ``law()``); imperfection None | "spot" | "band" with
+    imp_size (fraction of the width), the weak values imp_values (a dict field -> weak value,
+    any law) and the H-model's imp_phi_g, imp_alpha0 (used for an H-model specimen only),
     imp_angle (band) [deg]; Newton rtol / max_iter / max_cutbacks; fields: write fields.xdmf;
     n_sphere: strain directions sampled for the local minimum of the normalized W2.
     """
@@ -79,6 +84,8 @@ class BiaxialConfig:
     n_sphere: int = 600
     mp_reference: bool = True
     global_process: bool = True
+    material: object = None
+    imp_values: dict | None = None
 
     def validate(self) -> "BiaxialConfig":
         """Every field of the specimen, loading and solver out of its range raises ValueError
@@ -110,15 +117,89 @@ class BiaxialConfig:
             if not ok:
                 raise ValueError(f"{name} = {getattr(self, name)!r} is out of range: allowed "
                                  f"{allowed}")
+        if self.material is not None:
+            try:
+                material_of(self.material)
+            except MaterialError:
+                raise ValueError(f"material = {self.material!r} is out of range: allowed a "
+                                 "parameter record of a registered law (HParams, DPParams, ...) "
+                                 "or None (the H-model of the HParams fields)") from None
+            self._check_sigma2()
+        if self.imp_values is not None and not isinstance(self.imp_values, dict):
+            raise ValueError(f"imp_values = {self.imp_values!r} is out of range: allowed a dict "
+                             "of parameter fields -> weak values, or None")
         return self
 
-    def params(self) -> HParams:
-        """The material's HParams (p0 = sigma2)."""
-        return HParams(**{f: getattr(self, c) for c, f in MATERIAL.items()})
+    def _check_sigma2(self):
+        # one confining pressure: a record's p0 is never replaced silently
+        if self.material.p0 != self.sigma2:
+            raise ValueError(f"sigma2 = {self.sigma2!r} is out of range: allowed the material's "
+                             f"p0 = {self.material.p0!r} (the confining pressure is the "
+                             "record's p0: with_params(P) sets both)")
 
-    def with_params(self, params: HParams) -> "BiaxialConfig":
-        """This configuration with the material of ``params`` (sigma2 = its p0)."""
-        return replace(self, **{c: getattr(params, f) for c, f in MATERIAL.items()})
+    def params(self):
+        """The material's parameter record, p0 = sigma2: the HParams of the fields, or
+        ``material`` (whose p0 must be sigma2: ``with_params`` sets both)."""
+        if self.material is None:
+            return HParams(**{f: getattr(self, c) for c, f in MATERIAL.items()})
+        self._check_sigma2()
+        return self.material
+
+    def law(self):
+        """The law of the material (``point.contract.Material``)."""
+        return material_of(self.params())
+
+    def is_hmodel(self) -> bool:
+        """The material is the H-model (its fields, options and records apply)."""
+        return self.material is None or isinstance(self.material, HParams)
+
+    def with_params(self, params) -> "BiaxialConfig":
+        """This configuration with the material of ``params`` (sigma2 = its p0): an HParams sets
+        the H-model fields (``material`` None), another law's record sets ``material``."""
+        if isinstance(params, HParams):
+            return replace(self, material=None, **{c: getattr(params, f) for c, f in MATERIAL.items()})
+        return replace(self, material=params, sigma2=params.p0)
+
+    def weak_values(self) -> dict:
+        """The imperfection's weak values, field -> value: the H-model's imp_phi_g and
+        imp_alpha0 (where not None) for an H-model specimen, then imp_values."""
+        ch = {}
+        if self.is_hmodel():
+            ch = {k: v for k, v in (("phi_g", self.imp_phi_g), ("alpha0", self.imp_alpha0))
+                  if v is not None}
+        ch.update(self.imp_values or {})
+        return ch
+
+    def record(self) -> dict:
+        """The configuration as summary.json records it: every field, but for a specimen of
+        another law than the H-model, the material's record (its law's name and fields) in
+        place of the H-model fields and options that do not apply to it."""
+        d = asdict(self)
+        if self.material is None:
+            d.pop("material")
+            return d
+        for c in list(MATERIAL) + ["imp_phi_g", "imp_alpha0"]:
+            if c != "sigma2":
+                d.pop(c)
+        d["material"] = {"law": material_of(self.material).name, **d["material"]}
+        return d
+
+
+def material_record(params) -> dict:
+    """What the outputs say about the material of a run: the law's name and description, and
+    what its records mean where the law differs from the H-model (summary.json's "material")."""
+    law = material_of(params)
+    rec = {"name": law.name, "description": law.description,
+           "absent": law.absent()}
+    if "patterns" not in law.provides:
+        rec["sliding_fraction"] = ("the fraction of the points whose step loaded the material "
+                                   "(plastic): the law has no sliding pattern")
+        rec["open_fraction"] = "absent (the law has no open mechanisms)"
+    if not law.tangent_is_rate:
+        rec["criteria"] = ("the tangent criteria (local indicators, global check) are computed "
+                           "from the law's rate tangent at each converged state, not from the "
+                           "step's consistent tangent")
+    return rec
 
 
 # the material fields of BiaxialConfig -> HParams field (sigma2, the confining pressure, is p0)
@@ -136,8 +217,8 @@ def build_problem(cfg: BiaxialConfig) -> Biaxial:
         mesh = rectangle(cfg.width, cfg.height, cfg.nx, cfg.ny, cfg.mesh_kind)
     imp = None
     if cfg.imperfection not in (None, "", "none"):
-        imp = Imperfection(kind=cfg.imperfection, size=cfg.imp_size, phi_g=cfg.imp_phi_g,
-                           alpha0=cfg.imp_alpha0, angle=cfg.imp_angle)
+        imp = Imperfection(kind=cfg.imperfection, size=cfg.imp_size, phi_g=None, alpha0=None,
+                           values=cfg.weak_values(), angle=cfg.imp_angle)
     return Biaxial(mesh, params, imperfection=imp)
 
 
@@ -162,21 +243,28 @@ def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphe
                  check, times: dict):
     """One CSV row and the field data of a converged state, but for the global indicators:
     its stiffness is submitted to ``check`` (GlobalCheck or GlobalCheckProcess) and
-    ``_finish_record`` adds them; adds the seconds spent to times["global"], ["local"]."""
+    ``_finish_record`` adds them; adds the seconds spent to times["global"], ["local"].
+
+    The criteria are those of the rate problem at the converged state: the global check's K and
+    the local indicators are built from ``MaterialField.rate_tangent`` (the step's consistent
+    tangent itself for a law whose step tangent is its rate tangent, the H-model; the law's
+    rate tangent in the step's direction otherwise, e.g. the Drucker-Prager's D, whose
+    consistent tangent differs by O(G d lambda / tau))."""
     mat = prob.material
     s_m = stress_to_model(trial.sigma)                       # (2, 2, P) compression +
     s1 = -prob.platen_force(f_int) / prob.width
     s2 = float(prob.volume_average(s_m[1, 1]))
     q, p = s1 - s2, 0.5 * (s1 + s2)
     t0 = time.perf_counter()
-    check.submit(prob.stiffness(trial.D))
+    D = mat.rate_tangent(trial)
+    check.submit(prob.stiffness(D))
     t1 = time.perf_counter()
     times["global"] += t1 - t0
     df_int = info["df_int"]
     df_ext = np.zeros_like(df_int)        # reactions on prescribed dofs; f_lat is a dead load
     df_ext[prob.prescribed] = df_int[prob.prescribed]
     w2 = global_w2(info["du"], df_int, df_ext)
-    loc = local_indicators(trial.D, n_sphere=n_sphere,
+    loc = local_indicators(D, n_sphere=n_sphere,
                            one_thread=isinstance(check, GlobalCheckProcess))
     times["local"] += time.perf_counter() - t1
     eps_fe = prob.strain(stepper.u)
@@ -189,7 +277,8 @@ def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphe
                n_pts_w2_neg=int(np.count_nonzero(loc["w2_min"] <= 0)),
                n_pts_rice_neg=int(np.count_nonzero(loc["rice_min"] <= 0)),
                sliding_fraction=float(prob.volume_average(trial.sliding)),
-               open_fraction=float(prob.volume_average(trial.opened)),
+               open_fraction=(float(prob.volume_average(trial.opened))
+                              if trial.opened is not None else None),    # absent: an empty cell
                eps2_mean=float(prob.volume_average(strain_to_model(eps_fe)[1, 1])),
                time_s=time.perf_counter() - t_start)
     # fields: displacement (and the modes, _finish_record) at nodes; element means of stress /
@@ -200,8 +289,9 @@ def _step_record(prob: Biaxial, stepper: LoadStepper, trial, f_int, info, n_sphe
             "strain_tension_positive": cell_tensor(prob, eps_fe),
             "q": prob.per_element(s_m[0, 0] - s_m[1, 1]),
             "p": prob.per_element(0.5 * (s_m[0, 0] + s_m[1, 1])),
-            "sliding_fraction": prob.per_element(trial.sliding),
-            "open_fraction": prob.per_element(trial.opened)}
+            "sliding_fraction": prob.per_element(trial.sliding)}
+    if trial.opened is not None:
+        cell["open_fraction"] = prob.per_element(trial.opened)
     for k in ("det_D", "det_Ds", "lam_min_Ds", "w2_min", "rice_min"):
         cell[k] = prob.per_element(loc[k], how="min")
     weak = np.zeros(prob.nel)
@@ -257,11 +347,35 @@ def summarize(curve: dict, mp: dict | None) -> tuple[dict, dict]:
     return ev, summ
 
 
+def _material_title(params) -> str:
+    """The material in a figure's title: the law's name, and n_dir for the H-model."""
+    law = material_of(params)
+    return f"n_dir = {params.n_dir}" if isinstance(params, HParams) else law.name
+
+
+def _flags_text(law) -> str:
+    """What newton.log counts between iterates: the law's flags (``Material.flags_changed``)."""
+    return ("hexagon flags" if "patterns" in law.provides
+            else "points whose plastic flag")
+
+
+def record_params(out_dir, params, note="") -> str:
+    """Write ``params`` (any law) to ``out_dir``/params.json, the --params format, so that
+    ``--params out_dir/params.json`` repeats the run: the H-model's file as
+    ``hmodel.params.record_params`` writes it, another law's with its name as "model" and its
+    units (``common.paramfile.write_params``). Returns the file name."""
+    if isinstance(params, HParams):
+        return record_hmodel_params(out_dir, params, note)
+    law = material_of(params)
+    write_params(Path(out_dir) / "params.json", params, law.name, law.units, note)
+    return "params.json"
+
+
 def format_summary(summ: dict) -> str:
     """The table of the criteria: where each first fires (eps1 [%], eta), and the material
     point's peak, in columns as wide as the longest label."""
     mp = summ["material_point"]
-    mp_label = "material point (hmodel.driver, d_eps1 = 1e-5): peak of q"
+    mp_label = "material point (point.driver, d_eps1 = 1e-5): peak of q"
     w = max([len(e["label"]) for e in summ["events"].values()] + [len(mp_label)])
     lines = [f"{'criterion':<{w + 2}s}  eps1 [%]     eta"]
     for key, e in summ["events"].items():
@@ -309,7 +423,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
         writer = CurveWriter(out / "curve.csv")
         logf = open(out / "newton.log", "w")
         logf.write("# step d_eps1 | normalized residual |r|/(sigma2 H) of each iterate | "
-                   "hexagon flags switched between iterates\n")
+                   f"{_flags_text(prob.law)} switched between iterates\n")
         if cfg.fields:
             fields = FieldWriter(out / "fields.xdmf", prob.mesh.p.T, _cells(prob))
 
@@ -339,9 +453,10 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
                 f"eta = {row['eta']:.4f} it = {row['newton_iters']} cut = {row['cutbacks']} "
                 f"sign det K (platen displ./force) = {row['det_k_sign']:+d}/{row['det_k_sign_f']:+d} "
                 f"lam_min(K_s) (displ./force) = {row['lam_min_ks']:.3e}/{row['lam_min_ks_f']:.3e} Pa "
-                f"W2 = {row['w2_global']:+.3f} slide = {row['sliding_fraction']:.3f} "
+                f"W2 = {row['w2_global']:+.3f} {slide} = {row['sliding_fraction']:.3f} "
                 f"t = {row['time_s']:.1f} s")
 
+    slide = "slide" if "patterns" in prob.law.provides else "plastic"
     pending = []        # the last complete row, written while the next step is checked
 
     def flush(announce: bool):
@@ -406,16 +521,20 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
             writer.close()
         if fields is not None:
             fields.close()
-    curve = {k: np.array([r.get(k, np.nan) for r in rows], dtype=float) for k in rows[0]}
+    curve = {k: np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
+             for k in rows[0]}
     mp = material_point_curve(prob.params, max(cfg.eps1_max, 1e-4)) if cfg.mp_reference else None
     events, summ = summarize(curve, mp)
     timings = dict(stepper.times, total=time.perf_counter() - t_start,
                    indicators_output=t_ind["indicators_output"], global_indicators=t_ind["global"],
                    local_indicators=t_ind["local"],
-                   steps=stepper.step, points=prob.npts, n_dir=prob.params.n_dir)
+                   steps=stepper.step, points=prob.npts)
+    if cfg.is_hmodel():
+        timings["n_dir"] = prob.params.n_dir
     summ["timings"] = timings
-    summ["config"] = asdict(cfg)
+    summ["config"] = cfg.record()
     summ["parameters"] = params_note
+    summ["material"] = material_record(prob.params)
     summ["completed"] = error is None
     summ["outcome"] = "complete" if loss is None and error is None else (
         loss.outcome if loss is not None else "error")
@@ -429,7 +548,7 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
         summ["material_point"]["end"] = mp["end"] if mp["outcome"] != "complete" else None
     if out is not None:
         plot_curve(out / "curve.png", curve, mp,
-                   title=f"{prob.nel} elements, {prob.npts} points, n_dir = {prob.params.n_dir}",
+                   title=f"{prob.nel} elements, {prob.npts} points, {_material_title(prob.params)}",
                    end=loss.outcome if loss is not None else None)
         atomic_write_bytes(out / "summary.json", json.dumps(summ, indent=1, default=float).encode())
         logf.close()

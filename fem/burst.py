@@ -39,7 +39,7 @@ from point.burst_rule import (RELEASE, BurstRule, check_columns, ke_growth, rele
 from common.io import atomic_write_bytes, fmt, save_figure
 from common.options import vocabulary_range
 from .adapter import stress_to_model, strain_to_model
-from .biaxial import BiaxialConfig, build_problem, _cells
+from .biaxial import BiaxialConfig, build_problem, material_record, _cells
 from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, HISTORY_COLUMNS
 from .output import CurveWriter, FieldWriter, cell_tensor, nodal_vector, plot_mode
 from point.burst import CPeak, check_ratio
@@ -211,9 +211,16 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
     M = mass_matrix(prob, cfg.density)
     dc = cfg.dc_value
     rule = cfg.rule
-    imp = (f", {sc.imperfection} imperfection (phi_g {sc.imp_phi_g}, alpha0 {sc.imp_alpha0}, size "
-           f"{sc.imp_size}, angle {sc.imp_angle})" if sc.imperfection else ", perfect specimen")
-    say(f"fem burst: {prob.nel} elements, {prob.npts} points, n_dir {params.n_dir}{imp}; "
+    if not sc.imperfection:
+        imp = ", perfect specimen"
+    elif sc.is_hmodel() and not sc.imp_values:
+        imp = (f", {sc.imperfection} imperfection (phi_g {sc.imp_phi_g}, alpha0 {sc.imp_alpha0}, "
+               f"size {sc.imp_size}, angle {sc.imp_angle})")
+    else:
+        weak = ", ".join(f"{k} {v:g}" for k, v in sc.weak_values().items())
+        imp = f", {sc.imperfection} imperfection ({weak}, size {sc.imp_size}, angle {sc.imp_angle})"
+    law = prob.law.name + (f", n_dir {params.n_dir}" if sc.is_hmodel() else "")
+    say(f"fem burst: {prob.nel} elements, {prob.npts} points, {law}{imp}; "
         f"sigma2 {sc.sigma2:g} Pa; R {', '.join(f'{r:g}' for r in cfg.ratios)}; f "
         f"{', '.join(f'{f:g}' for f in cfg.start_fractions)}; dc {dc:g} Pa (held force step "
         f"dG = B dc = {B * dc:.4g} N/m); density "
@@ -332,7 +339,10 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
             if w is not None:
                 w.close()
     timings["total"] = time.perf_counter() - t_start
-    summary = {"config": asdict(cfg), "dc": dc, "parameters": asdict(params),
+    config = asdict(cfg)
+    config["specimen"] = sc.record()
+    summary = {"config": config, "dc": dc, "parameters": asdict(params),
+               "material": material_record(params),
                "material_point_drained_peak": {"eta": eta_peak, "eps1": mp_curve["eps1_peak"]},
                "mesh": {"elements": prob.nel, "points": prob.npts, "dofs": prob.ndofs},
                "fields": ({"run": fields_run, "frames_every": _frame_every(cfg)}

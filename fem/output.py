@@ -267,7 +267,7 @@ def plot_curve(path, curve: dict, mp: dict | None = None, title: str = "",
     fig, ax = plt.subplots(figsize=(7.5, 5))
     if mp is not None:
         ax.plot(100 * mp["eps1"], mp["q"] / 1e3, "k--", lw=1.2, zorder=3,
-                label=r"material point (hmodel.driver, $\delta\varepsilon_1$ = 1e-5)")
+                label=r"material point (point.driver, $\delta\varepsilon_1$ = 1e-5)")
     e, q = 100 * curve["eps1"], curve["q"] / 1e3
     ax.plot(e, q, "o-", ms=2.5, lw=1, color="C0", label="FE specimen")
     if end is not None:

@@ -15,7 +15,9 @@ Boundary conditions (docs/fem.md):
   reference-configuration stresses, this is the choice under which the perfect specimen
   reproduces the material point exactly (the material point holds its Cauchy s22 = sigma2).
 The initial state is the isotropic state p0 = sigma2 of the material, uniform, so the initial
-residual vanishes: the specimen starts in equilibrium with the confining pressure.
+residual vanishes: the specimen starts in equilibrium with the confining pressure. The material
+is any law of the material contract (``point.contract``): its parameter record says which
+(``point.material_of``).
 """
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ import skfem
 from skfem import Basis, FacetBasis, ElementVector, LinearForm
 from skfem.helpers import dot
 
-from hmodel import HParams
+from point.contract import material_of
 from .adapter import MaterialField
 
 __all__ = ["Imperfection", "Biaxial", "PatternGather"]
@@ -38,7 +40,10 @@ __all__ = ["Imperfection", "Biaxial", "PatternGather"]
 @dataclass(frozen=True)
 class Imperfection:
     """A weaker zone: every quadrature point of the elements whose centroid lies in it gets the
-    modified parameters (phi_g [deg] and/or alpha0 [deg]; None keeps the specimen's value).
+    modified parameters: ``values``, a dict of the specimen's parameter fields -> their weak
+    values (any law, e.g. {"mu_p": 0.5} for a Drucker-Prager specimen), and the H-model's
+    shorthands phi_g [deg] and alpha0 [deg] (None keeps the specimen's value; ``values`` wins
+    where both name a field).
 
     kind : "spot" (a disk of radius ``size`` * width centred at (x, y) given as fractions of the
     width and height; default on the left face at mid-height so the band can choose its own
@@ -53,6 +58,7 @@ class Imperfection:
     x: float = 0.0
     y: float = 0.5
     angle: float = 45.0
+    values: dict | None = None
 
     def __post_init__(self):
         if self.kind not in ("spot", "band"):
@@ -63,15 +69,28 @@ class Imperfection:
         if not np.isfinite(self.angle):
             raise ValueError(f"Imperfection.angle = {self.angle!r} is out of range: allowed a finite "
                              "angle [deg]")
-        if self.phi_g is None and self.alpha0 is None:
-            raise ValueError("Imperfection needs a weaker phi_g or alpha0")
+        if self.values is not None and not isinstance(self.values, dict):
+            raise ValueError(f"Imperfection.values = {self.values!r}: allowed a dict of "
+                             "parameter fields -> weak values")
+        if self.phi_g is None and self.alpha0 is None and not self.values:
+            raise ValueError("Imperfection needs a weak value (values, or the H-model's phi_g or "
+                             "alpha0)")
 
-    def params(self, base: HParams) -> HParams:
-        ch = {}
-        if self.phi_g is not None:
-            ch["phi_g"] = self.phi_g
-        if self.alpha0 is not None:
-            ch["alpha0"] = self.alpha0
+    def changes(self) -> dict:
+        """The weak values: field -> value (phi_g, alpha0 where given, then ``values``)."""
+        ch = {k: v for k, v in (("phi_g", self.phi_g), ("alpha0", self.alpha0)) if v is not None}
+        ch.update(self.values or {})
+        return ch
+
+    def params(self, base):
+        """The weak zone's parameter record: ``base`` (of any law) with ``changes()``; a field
+        the record does not have is refused (ValueError naming it and the record's fields)."""
+        ch = self.changes()
+        known = [f for f in base.__dataclass_fields__ if not f.startswith("_")]
+        for k in ch:
+            if k not in known:
+                raise ValueError(f"{k} is no parameter of the {material_of(base).name} specimen's "
+                                 f"{type(base).__name__}: allowed {', '.join(known)}")
         return base.replace(**ch)
 
     def elements(self, mesh: skfem.Mesh) -> np.ndarray:
@@ -94,16 +113,18 @@ class Imperfection:
 class Biaxial:
     """Plane-strain biaxial specimen: mesh, bases, dofs, boundary conditions, assembly.
 
-    mesh : skfem MeshQuad or MeshTri (see fem.mesh). params : HParams of the specimen; the
-    confining pressure sigma2 is params.p0 [Pa] (initial state in equilibrium with it).
+    mesh : skfem MeshQuad or MeshTri (see fem.mesh). params : the parameter record of the
+    specimen's law (HParams, DPParams, ...: ``point.material_of``); the confining pressure
+    sigma2 is params.p0 [Pa] (initial state in equilibrium with it).
     imperfection : optional Imperfection. intorder : quadrature order (default 2: 2x2 Gauss
     points on quads, 1 point on linear triangles).
     """
 
-    def __init__(self, mesh: skfem.Mesh, params: HParams, imperfection: Imperfection | None = None,
+    def __init__(self, mesh: skfem.Mesh, params, imperfection: Imperfection | None = None,
                  intorder: int | None = None, allow_sliding: bool = True):
         self.mesh = mesh
         self.params = params
+        self.law = material_of(params)
         self.sigma2 = float(params.p0)
         if isinstance(mesh, skfem.MeshQuad1):
             elem, order = skfem.ElementQuad1(), 2

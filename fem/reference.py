@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hmodel import HParams
+from point.contract import material_of
 from point.driver import (MixedControl, isotropic_state, mixed_step, run_path, drained_biaxial,
                            stress_invariants)
 from point.burst import CPeak, proportional_path
@@ -30,15 +30,22 @@ from .indicators import mandel
 __all__ = ["material_point_criteria", "material_point_curve", "CPeak", "material_point_path"]
 
 
-def material_point_criteria(params: HParams, d_eps1: float, n_steps: int) -> dict:
-    """Step the material point (eps11 += d_eps1, sigma22 = p0, sigma12 = 0) n_steps times.
+def material_point_criteria(params, d_eps1: float, n_steps: int, keep_states: bool = False) -> dict:
+    """Step the material point of any law (eps11 += d_eps1, sigma22 = p0, sigma12 = 0) n_steps
+    times.
 
     Returns arrays of length n_steps + 1 (row 0: the isotropic state with the tangent of a zero
     increment is not computed: NaN): eps1, s1, s2, q, p, eta [Pa], and per step
-    lam_min_ds_disp, det_disp, lam_min_ds_force, det_force (Mandel matrices, Pa / Pa^n).
+    lam_min_ds_disp, det_disp, lam_min_ds_force, det_force (Mandel matrices, Pa / Pa^n) of the
+    rate tangent at the state reached (the step's consistent tangent for a law whose step tangent
+    is its rate tangent, ``Material.tangent_is_rate``; else ``Material.rate_tangent`` in the
+    step's direction), as the FE's criteria are. ``keep_states``: also "states", the list of
+    the n_steps + 1 states.
     """
     ctl = MixedControl(strain_controlled=(True, False, False), d_eps=(d_eps1, 0.0, 0.0))
+    law = material_of(params)
     state = isotropic_state(params)
+    states = [state]
     target = np.array([0.0, params.p0, 0.0])
     keys = ("eps1", "s1", "s2", "lam_min_ds_disp", "det_disp", "lam_min_ds_force", "det_force")
     out = {k: np.full(n_steps + 1, np.nan) for k in keys}
@@ -51,8 +58,11 @@ def material_point_criteria(params: HParams, d_eps1: float, n_steps: int) -> dic
         de = np.asarray(de)
         guess = de
         state = inc.state
+        states.append(state)
         eps1 += d_eps1
-        M = mandel(inc.tangent)
+        D = inc.tangent if law.tangent_is_rate else law.rate_tangent(
+            state, np.array([[de[0], de[2]], [de[2], de[1]]]), params)
+        M = mandel(D)
         Ms = 0.5 * (M + M.T)
         s = to_voigt(inc.stress)[0]
         out["eps1"][k], out["s1"][k], out["s2"][k] = eps1, s[0], s[1]
@@ -63,11 +73,13 @@ def material_point_criteria(params: HParams, d_eps1: float, n_steps: int) -> dic
     out["q"] = out["s1"] - out["s2"]
     out["p"] = 0.5 * (out["s1"] + out["s2"])
     out["eta"] = out["q"] / out["p"]
+    if keep_states:
+        out["states"] = states
     return out
 
 
-def material_point_curve(params: HParams, eps1_max: float, d_eps1: float = 1e-5) -> dict:
-    """The drained biaxial curve of hmodel.driver (for the figure and the peak): eps1, q, p, eta,
+def material_point_curve(params, eps1_max: float, d_eps1: float = 1e-5) -> dict:
+    """The drained biaxial curve of point.driver, any law (for the figure and the peak): eps1, q, p, eta,
     the peak (eps1_peak, q_peak, eta_peak), and how the path ended (outcome, end: the line of
     ``PathResult.end``, e.g. 'discontinuous at eps1 = ...' where no static state exists beyond)."""
     n = max(1, int(round(eps1_max / d_eps1)))
@@ -79,7 +91,7 @@ def material_point_curve(params: HParams, eps1_max: float, d_eps1: float = 1e-5)
             "outcome": r.end.outcome, "end": r.end.line()}
 
 
-def material_point_path(params: HParams, eta_start: float, ratio: float, d_eps1: float,
+def material_point_path(params, eta_start: float, ratio: float, d_eps1: float,
                         path_d_eps1: float, path_strain: float) -> dict:
     """The material point's burst path (docs/burst.md): the drained path (``state_at_eta``,
     steps ``d_eps1``) to the first state with eta >= ``eta_start``, then the proportional strain

@@ -325,7 +325,7 @@ def static_scan(prob, u_n: np.ndarray, delta_n: float, h: float, last=None,
         return StaticVerdict(outcome, delta_n, target, float(deltas.max()), (a[0], b[0]),
                              (a[1], b[1]), (a[2], b[2]), len(pts) - 1)
 
-    if deltas[-1] >= target:
+    if deltas[-1] >= target and len(pts) > 1:
         below = [k for k in range(1, len(pts)) if delta_n < deltas[k] <= target]
         k = max(below, key=lambda j: deltas[j]) if below else len(pts) - 1
         _, y, u, f, trial, rn = pts[k]
@@ -350,8 +350,12 @@ class LoadStepper:
     """Displacement-driven load steps with automatic cut-back.
 
     d_eps1 : nominal axial strain increment per step (> 0, compression); a failed step is retried
-    with half the increment, up to ``max_cutbacks`` halvings in a row; after a success the
-    increment grows back (x2) towards the nominal one. ``on_step(result, info)`` is called after
+    with half the increment, up to ``max_cutbacks`` halvings in a row and never below the floor
+    d_eps1 / 2**max_cutbacks (a step that already started below the nominal one, after cut-backs,
+    is not halved past the floor: approaching a turning point of the platen displacement, every
+    step would otherwise succeed at a smaller increment than the last, towards the turning point
+    without ever reaching the scan that decides it); after a success the increment grows back
+    (x2) towards the nominal one. ``on_step(result, info)`` is called after
     each converged (and committed) step. ``u0`` : (ndofs,) the displacement [m] of the committed
     state the steps start from (default zeros: the initial state); ``du0`` : (ndofs,) the
     displacement per unit platen displacement the first step's predictor extrapolates (default
@@ -401,6 +405,7 @@ class LoadStepper:
         StaticLoss (``verdict``: 'uncontrollable' or 'discontinuous'); RuntimeError when the
         scan can decide neither."""
         cut = 0
+        floor = self.d_eps1 * self.prob.height / 2 ** self.max_cutbacks
         while True:
             try:
                 res = newton_step(self.prob, self.u, self._guess(h), self.rtol, self.max_iter,
@@ -410,7 +415,7 @@ class LoadStepper:
                 if self.log:
                     self.log(f"step {self.step + 1}: d_eps1 = {h / self.prob.height:.3e} failed "
                              f"({e}); residuals {['%.2e' % r for r in e.residuals]}")
-                if cut >= self.max_cutbacks:
+                if cut >= self.max_cutbacks or 0.5 * h < floor * (1.0 - 1e-12):
                     res, h = self._decide(h, cut, e)
                     break
                 cut += 1
@@ -424,7 +429,7 @@ class LoadStepper:
         self.delta += h
         self.step += 1
         for key in ("update", "assembly", "solve"):
-            self.times[key] += res.times[key]
+            self.times[key] += res.times.get(key, 0.0)     # a scan's state has none
         self.times["iterations"] += res.iterations
         return res, h, cut
 

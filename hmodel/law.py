@@ -11,6 +11,7 @@ of sliding and open hexagons.
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from point.contract import Material, MaterialError, Rows, register
@@ -19,9 +20,10 @@ from point.driver import PathResult, _Cut, _Progress, _tensor, compressed_state
 from point.tensors import to_voigt
 
 from . import _kernels
-from .material import (HState, HEX_FIELDS, broadcast_state, check_state, increment_from_outputs,
-                       kernel_args, reference_state, take_points, update, update_copies,
-                       update_full, _material_args)
+from .material import (HState, HEX_FIELDS, PARALLEL_MIN_POINTS, broadcast_state, check_state,
+                       from_voigt, increment_from_outputs, kernel_args, reference_state,
+                       take_points, update, update_copies, update_full, _material_args,
+                       _refuse_non_finite)
 from .params import HParams, UNITS
 
 __all__ = ["HModel", "HMODEL"]
@@ -40,6 +42,9 @@ class HModel(Material):
     units = UNITS
     provides = frozenset({"lagrangian", "micro", "patterns"})
     description = "the H-microdirectional model (hexagons of grains, Nicot & Darve 2011)"
+    # the tangent of a step is the exact derivative of its stress, piecewise constant for a fixed
+    # sliding pattern: the rate tangent at the state the step reaches, on the step's branch
+    tangent_is_rate = True
 
     def initial_state(self, params: HParams, batch_shape: tuple = ()) -> HState:
         """From d1 = d2 = 2 r_g, alpha = alpha0 compressed isotropically to p0 (MixedControlError
@@ -87,6 +92,40 @@ class HModel(Material):
         return Rows(named["stress"], named["tangent"], np.any(named["sliding"] & closed, axis=-1),
                     named)
 
+    def update_voigt(self, state, de, params, elastic: bool = False) -> tuple:
+        """``Material.update_voigt`` by the update kernel called here directly: the same checks
+        and the same bits as ``update_full(state, de as tensors, params, allow_sliding=not
+        elastic, extras=False)``, the stress and tangent rows as the kernel gives them (no
+        Lagrangian tangent, increment or T3 conversions a field never reads). The outputs are new
+        arrays at every call, as in ``update_full``: pooled buffers saved a few page faults but
+        changed how the process's heap serves other large arrays (the FE benchmark's batch
+        baseline, interleaved with the run, then took ~4500 page faults a call and twice the
+        time)."""
+        check_state(state, params)
+        args = kernel_args(state, params)          # 10 hexagon fields, was_open, eps, V0, eps
+        npts, ndir = args[0].shape
+        out = _kernels.allocate_outputs(npts, ndir)
+        kern = _kernels.update_parallel if npts >= PARALLEL_MIN_POINTS else _kernels.update_serial
+        kern(*args[:-1], de, *_material_args(params), not elastic, False, *out)
+        sig, tan = out[12], out[13]
+        if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
+            _refuse_non_finite(state)
+        batch = state.batch_shape
+        ns = HState(*out[:10], eps=state.eps + from_voigt(de, batch), stress=from_voigt(sig, batch),
+                    V0=np.array(state.V0, dtype=float), sliding=out[10], is_open=out[11],
+                    params_key=state.params_key)
+        return ns, sig, tan
+
+    def point_fractions(self, state) -> tuple:
+        """(sliding, opened): (n,) fractions of each point's hexagons that slid / are open."""
+        n = state.n_dir
+        return (_row_fractions(state.sliding.reshape(-1, n)),
+                _row_fractions(state.is_open.reshape(-1, n)))
+
+    def flags_changed(self, a, b) -> int:
+        """The hexagons whose sliding or opening flag differs between two states."""
+        return int(_n_differ(a.sliding, b.sliding) + _n_differ(a.is_open, b.is_open))
+
     def pattern_changes(self, state, params, de_a, de_b) -> dict:
         """The orientations whose open / sliding flags differ between the increments de_a and
         de_b (3,) from ``state``: theta [deg], N1, N2 [N] and alpha [deg] where each is closed,
@@ -112,7 +151,7 @@ class HModel(Material):
     def kernels(self) -> tuple:
         """The Numba kernels a first run compiles (``point.experiment.compile_kernels``)."""
         return (_kernels.update_serial, _kernels.update_parallel, _kernels.mixed_step_single,
-                _kernels.path_single)
+                _kernels.path_single, _row_fractions, _n_differ)
 
     def warm_up(self) -> None:
         """Compile the kernels on a tiny case (n_dir = 8)."""
@@ -123,6 +162,8 @@ class HModel(Material):
         mixed_step(s, p, drained_biaxial(1e-5), [0.0, p.p0, 0.0])     # mixed_step_single
         update_full(s, np.zeros((2, 2)), p)                          # update_serial
         strain_probes(s, p, np.linspace(0.0, 360.0, 64, endpoint=False))   # update_parallel
+        self.flags_changed(s, s)                                     # _n_differ
+        self.point_fractions(broadcast_state(s, (2,)))               # _row_fractions
 
     # -- the fast paths ------------------------------------------------------------------------
     def mixed_step_fast(self, state, params, control, target, guess, tol, max_iter):
@@ -232,6 +273,32 @@ class HModel(Material):
         return result(done)
 
 
+
+
+@numba.njit(cache=True)
+def _row_fractions(flags):
+    """(npts,) fraction of the True flags of each row of (npts, n_dir) bools: the integer count
+    / n_dir, the value (and bits) of flags.mean(axis=-1), without numpy's conversion of the
+    flags to numbers."""
+    npts, n = flags.shape
+    out = np.empty(npts)
+    for p in range(npts):
+        c = 0
+        for i in range(n):
+            c += flags[p, i]
+        out[p] = c / n
+    return out
+
+
+@numba.njit(cache=True)
+def _n_differ(a, b):
+    """Number of entries where two bool arrays of the same shape differ."""
+    x = a.ravel()
+    y = b.ravel()
+    c = 0
+    for i in range(x.size):
+        c += x[i] != y[i]
+    return c
 
 
 def _state_from_work(state, work, sliding, sig) -> HState:

@@ -164,23 +164,24 @@ PARAM_OPTIONS = tuple((t.name, f.split(".", 1)[1]) for t in VOCABULARY.values() 
                       if f.startswith("HParams.") and f != "HParams.p0")
 
 
-def add_param_options(ap: argparse.ArgumentParser):
-    """--params FILE and an option for every HParams field but p0 (the commands' --sigma2), all
-    None unless given: the file (or Table I) supplies the rest (``params_from``), HParams checks
-    them."""
+def add_param_options(ap: argparse.ArgumentParser,
+                      file_note: str = "of the H-model: python -m hmodel params --out FILE"):
+    """--params FILE (``file_note``: what file it takes) and an option for every HParams field
+    but p0 (the commands' --sigma2), all None unless given: the file (or Table I) supplies the
+    rest (``params_from``), HParams checks them."""
     d = HParams()
     g = ap.add_argument_group("model parameters (Table I unless --params FILE; an option given "
                               "overrides the file)")
-    opt.add(g, "--params", metavar="FILE", note="of the H-model: python -m hmodel params --out FILE",
-        default_text="Table I")
+    opt.add(g, "--params", metavar="FILE", note=file_note, default_text="Table I")
     for option, name in PARAM_OPTIONS:
         opt.add(g, option, record="HParams", metavar=name.upper(),
             default_text=f"the file's, else Table I's "
                          f"{'null (2 r_g)' if getattr(d, name) is None else format(getattr(d, name), 'g')}")
 
 
-def params_from(args, p0=None):
-    """The HParams of a command: the --params file (or Table I), then the options given on top;
+def params_from(args, p0=None, base=None):
+    """The HParams of a command: the --params file (or Table I; ``base``: the file's record
+    already read), then the options given on top;
     p0 is ``p0`` if given, else --sigma2 when given as one value (the confining stress of the
     test: it overrides the file's p0), else the file's. Sets ``args.params_note``, the line of
     the run's summary that says where the values came from ("parameters: the file p.json;
@@ -188,7 +189,8 @@ def params_from(args, p0=None):
     ValueError (OptionError) of one line naming the key or the option."""
     from common.paramfile import override
     path = getattr(args, "params", None)
-    base = load_params(path) if path else HParams()
+    if base is None:
+        base = load_params(path) if path else HParams()
     given = [(o, n, getattr(args, n)) for o, n in PARAM_OPTIONS if getattr(args, n, None) is not None]
     sigma2 = getattr(args, "sigma2", None)
     if p0 is not None:

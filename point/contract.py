@@ -25,8 +25,13 @@ What a law may add (``Material.provides`` names it, and the outputs say what is 
 ``"lagrangian"`` (the Lagrangian increment dPi, the transport term T3, the volume: the H-model's
 Eq. 10 W2 and its Eulerian split), ``"micro"`` (the micro sums of Eqs. 36-37), ``"patterns"``
 (the sliding / opening flags of the H-model's hexagons). A law may override ``update_rows``,
-``mixed_step_fast`` and ``path_fast`` with faster code (the H-model's Numba kernels) that must
-give the numbers the generic code gives from ``update``.
+``update_voigt`` (a field of points: the FE's quadrature points), ``mixed_step_fast`` and
+``path_fast`` with faster code (the H-model's Numba kernels) that must give the numbers the
+generic code gives from ``update``; and ``point_fractions`` / ``flags_changed`` (what a field
+records of its points' mechanisms: the H-model's hexagons, by default the plastic flag). The
+class attribute ``tangent_is_rate`` says whether a step's consistent tangent is the rate tangent
+at the state it reaches (the H-model: yes; by default no, and the bifurcation criteria of a field
+are computed from ``rate_tangent``).
 """
 from __future__ import annotations
 
@@ -120,6 +125,13 @@ class Material:
     units: dict = {}
     provides: frozenset = frozenset()
     description: str = ""
+    # Is the consistent tangent of a step the rate tangent at the state the step reaches? True
+    # for a law whose tangent is constant on a branch (the H-model, for a fixed sliding pattern):
+    # the tangent criteria of a converged step (an FE step's local indicators and global check)
+    # may then be read from the step's own tangent. False (the default, which is always right):
+    # they are computed from ``rate_tangent`` at the state reached, in the step's direction (the
+    # Drucker-Prager's D_alg differs from its D by O(G d lambda / tau)).
+    tangent_is_rate: bool = False
 
     # -- what every law implements ----------------------------------------------------------
     def initial_state(self, params, batch_shape: tuple = ()):
@@ -178,6 +190,35 @@ class Material:
             stress, tangent, new = self.update(many, d_eps, params)
         return Rows(to_voigt(stress), voigt_tangent(tangent), self.plastic(new, (n,)), {})
 
+    def update_voigt(self, state, de: np.ndarray, params, elastic: bool = False) -> tuple:
+        """The update of a flat batch ``state`` (batch (n,)) by one strain increment a point,
+        the rows ``de`` (n, 3) (11, 22, 12, tensor shear): ``(new_state, stress (n, 3) [Pa] rows
+        (11, 22, 12), tangent (n, 3, 3) [Pa] rows T[p, a, b] = d sigma_a / d v_b)``, what a
+        field of points (the FE's quadrature points) needs. ``elastic``: ``elastic_update``.
+        The default is ``update`` with the rows as tensors; a law may override it with a faster
+        route to the same numbers (the H-model: its kernel's outputs as they come)."""
+        de = np.asarray(de, dtype=float)
+        batch = tuple(state.batch_shape)
+        f = self.elastic_update if elastic else self.update
+        stress, tangent, new = f(state, from_voigt(de, batch), params)
+        return new, to_voigt(stress), voigt_tangent(tangent)
+
+    def point_fractions(self, state) -> tuple:
+        """``(sliding, opened)`` of a flat batch ``state``: (n,) fractions of each point's
+        mechanisms that slid in the step that made the state, and that are open (a field's
+        records). Default, a law without patterns: ``sliding`` is the plastic flag (1.0 where the
+        step loaded the material, ``plastic``), ``opened`` None (absent)."""
+        n = int(np.prod(state.batch_shape, dtype=int))
+        return self.plastic(state, state.batch_shape).reshape(n).astype(float), None
+
+    def flags_changed(self, a, b) -> int:
+        """The number of mechanism flags that differ between two states of the same points (two
+        Newton iterates of a field: a non-zero count means the iteration changed branch, so no
+        quadratic convergence is expected there). Default: the points whose plastic flag
+        differs."""
+        sb = tuple(a.batch_shape)
+        return int(np.count_nonzero(self.plastic(a, sb) != self.plastic(b, sb)))
+
     def plastic(self, new_state, batch_shape) -> np.ndarray:
         """(*batch,) bool: the step that made ``new_state`` loaded the material (default: the
         state's field ``plastic`` if it has one, else all False)."""
@@ -197,10 +238,12 @@ class Material:
         the consistent tangent of the increment ``norm`` direction / |direction|, exact for a
         law whose tangent is constant on a branch (the H-model, for a fixed pattern); a law
         whose consistent tangent depends on the step's size overrides it with the exact rate
-        tangent."""
+        tangent. A zero direction (no step) gives the tangent of the zero increment."""
         d = np.asarray(direction, dtype=float)
         mag = np.sqrt(np.einsum("ab...,ab...->...", d, d))
-        return self.update(state, norm * d / mag, params)[1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d = np.where(mag > 0, norm * d / mag, 0.0)
+        return self.update(state, d, params)[1]
 
     def mechanism(self, state, params):
         """The single plastic mechanism of a single-point state where the law has one

@@ -292,12 +292,16 @@ def test_not_converged_is_its_own_outcome(tmp_path, monkeypatch):
     import fem.dynamics as fd
     from fem.solver import NewtonError
     real = fd.newmark_step
-    calls = {}
+    systems, calls = [], []          # the systems held: an id() alone may be reused once freed
 
     def flaky(system, m, dt, *a, **k):
-        key = id(system)
-        calls[key] = calls.get(key, 0) + 1
-        if len(calls) == 2 and calls[key] >= 30:
+        k_sys = next((i for i, s in enumerate(systems) if s is system), None)
+        if k_sys is None:
+            systems.append(system)
+            calls.append(0)
+            k_sys = len(systems) - 1
+        calls[k_sys] += 1
+        if k_sys == 1 and calls[k_sys] >= 30:
             raise NewtonError("injected")
         return real(system, m, dt, *a, **k)
     monkeypatch.setattr(fd, "newmark_step", flaky)

@@ -129,6 +129,50 @@ def test_load_stepper_ends_with_the_loss(monkeypatch):
     assert st.delta <= d_max and d_max - st.delta < 0.5 / 8 + 1e-12
 
 
+def test_steps_are_not_halved_past_the_floor(monkeypatch):
+    """Near a turning point Newton's reach shrinks with the distance to it (forced: a step
+    converges only if it covers at most half the platen displacement left to the turn). Each step
+    then succeeds after cut-backs at a smaller increment than the last, towards the turn without
+    reaching it (the Drucker-Prager specimen at sigma2 = 600 kPa did so, 1e-29 steps); the
+    increment is never halved below d_eps1 / 2**max_cutbacks, so at that floor the failure goes to
+    the scan, which ends the run 'uncontrollable' at the turn, within a few steps."""
+    x_t, d_max = turning_point()
+    prob = Springs()
+    real = solver.newton_step
+
+    calls = []
+
+    def shrinking_reach(p, u_old, u_guess, *a, **k):
+        calls.append(1)
+        if len(calls) > 1000:           # without the floor the steps never end: fail, not hang
+            pytest.fail("the steps shrink towards the turn without end")
+        if u_guess[1] - u_old[1] > 0.5 * (d_max - u_old[1]):
+            raise NewtonError("forced: beyond Newton's reach", [1.0])
+        return real(p, u_old, u_guess, *a, **k)
+    monkeypatch.setattr(solver, "newton_step", shrinking_reach)
+    st = LoadStepper(prob, 0.005, max_cutbacks=3)      # steps of delta 0.5, floor 0.0625
+    with pytest.raises(StaticLoss) as e:
+        st.run(0.2, on_step=None)
+    v = e.value.verdict
+    assert v.outcome == "uncontrollable" and v.delta_max == pytest.approx(d_max, abs=1e-3)
+    assert st.step < 40 and d_max - st.delta < 2 * 0.0625
+
+
+def test_a_scan_that_finds_no_point_is_not_exists(monkeypatch):
+    """A step below the platen displacement's resolution (delta + h == delta) whose points all
+    fail: the scan has reached the step's end only trivially, with no state of its own; it is
+    'unresolved' (it was 'exists' with no state to commit)."""
+    prob = Springs()
+    x = 0.2
+    d = x + f_a(x) / K_B
+    prob.commit(prob.trial(np.array([x, d - x])))
+    real = prob.trial
+    monkeypatch.setattr(prob, "trial", lambda dd: (_ for _ in ()).throw(ValueError("forced"))
+                        if np.any(dd != 0) else real(dd))
+    v = static_scan(prob, np.array([x, d]), d, 1e-30)
+    assert d + 1e-30 == d and v.outcome == "unresolved" and v.points == 0 and v.result is None
+
+
 def test_fem_biaxial_ends_with_the_outcome(tmp_path, monkeypatch, capsys):
     """The run's handling: a step without a static state (the scan's verdict forced to
     'uncontrollable' at step 4) ends the run as its result: exit 0, the converged rows in

@@ -844,3 +844,29 @@ def path_single(d1, d2, alpha, N1, T1, N2, l1, l2, cos_a, sin_a, was_open, eps, 
         h_nsl[k] = ns
         h_nop[k] = no
     return n_steps, rn, 0
+
+
+@njit(cache=True)
+def row_fractions(flags):
+    """(npts,) fraction of the True flags of each row of (npts, n_dir) bools: the integer count
+    / n_dir, the value (and bits) of flags.mean(axis=-1), without numpy's conversion of the
+    flags to numbers."""
+    npts, n = flags.shape
+    out = np.empty(npts)
+    for p in range(npts):
+        c = 0
+        for i in range(n):
+            c += flags[p, i]
+        out[p] = c / n
+    return out
+
+
+@njit(cache=True)
+def n_differ(a, b):
+    """Number of entries where two bool arrays of the same shape differ."""
+    x = a.ravel()
+    y = b.ravel()
+    c = 0
+    for i in range(x.size):
+        c += x[i] != y[i]
+    return c

@@ -11,7 +11,6 @@ of sliding and open hexagons.
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from point.contract import Material, MaterialError, Rows, register
@@ -119,12 +118,12 @@ class HModel(Material):
     def point_fractions(self, state) -> tuple:
         """(sliding, opened): (n,) fractions of each point's hexagons that slid / are open."""
         n = state.n_dir
-        return (_row_fractions(state.sliding.reshape(-1, n)),
-                _row_fractions(state.is_open.reshape(-1, n)))
+        return (_kernels.row_fractions(state.sliding.reshape(-1, n)),
+                _kernels.row_fractions(state.is_open.reshape(-1, n)))
 
     def flags_changed(self, a, b) -> int:
         """The hexagons whose sliding or opening flag differs between two states."""
-        return int(_n_differ(a.sliding, b.sliding) + _n_differ(a.is_open, b.is_open))
+        return int(_kernels.n_differ(a.sliding, b.sliding) + _kernels.n_differ(a.is_open, b.is_open))
 
     def pattern_changes(self, state, params, de_a, de_b) -> dict:
         """The orientations whose open / sliding flags differ between the increments de_a and
@@ -151,7 +150,7 @@ class HModel(Material):
     def kernels(self) -> tuple:
         """The Numba kernels a first run compiles (``point.experiment.compile_kernels``)."""
         return (_kernels.update_serial, _kernels.update_parallel, _kernels.mixed_step_single,
-                _kernels.path_single, _row_fractions, _n_differ)
+                _kernels.path_single, _kernels.row_fractions, _kernels.n_differ)
 
     def warm_up(self) -> None:
         """Compile the kernels on a tiny case (n_dir = 8)."""
@@ -162,8 +161,8 @@ class HModel(Material):
         mixed_step(s, p, drained_biaxial(1e-5), [0.0, p.p0, 0.0])     # mixed_step_single
         update_full(s, np.zeros((2, 2)), p)                          # update_serial
         strain_probes(s, p, np.linspace(0.0, 360.0, 64, endpoint=False))   # update_parallel
-        self.flags_changed(s, s)                                     # _n_differ
-        self.point_fractions(broadcast_state(s, (2,)))               # _row_fractions
+        self.flags_changed(s, s)                                     # n_differ
+        self.point_fractions(broadcast_state(s, (2,)))               # row_fractions
 
     # -- the fast paths ------------------------------------------------------------------------
     def mixed_step_fast(self, state, params, control, target, guess, tol, max_iter):
@@ -273,32 +272,6 @@ class HModel(Material):
         return result(done)
 
 
-
-
-@numba.njit(cache=True)
-def _row_fractions(flags):
-    """(npts,) fraction of the True flags of each row of (npts, n_dir) bools: the integer count
-    / n_dir, the value (and bits) of flags.mean(axis=-1), without numpy's conversion of the
-    flags to numbers."""
-    npts, n = flags.shape
-    out = np.empty(npts)
-    for p in range(npts):
-        c = 0
-        for i in range(n):
-            c += flags[p, i]
-        out[p] = c / n
-    return out
-
-
-@numba.njit(cache=True)
-def _n_differ(a, b):
-    """Number of entries where two bool arrays of the same shape differ."""
-    x = a.ravel()
-    y = b.ravel()
-    c = 0
-    for i in range(x.size):
-        c += x[i] != y[i]
-    return c
 
 
 def _state_from_work(state, work, sliding, sig) -> HState:

@@ -327,7 +327,10 @@ def _return(params: DPParams, p_tr, tau_tr, k_n):
     """Delta lambda (m,) of the return mapping: the root of r(x) = tau_tr - G x -
     mu(k_n + x) (p_tr + K2 beta(k_n + x) x) in [0, tau_tr / G] (r(0) > 0 > r(tau_tr / G) while
     p > 0), by Newton kept inside the bracket (bisection where a Newton step leaves it), to the
-    last bits of x."""
+    last bits of x. One point (the driver's steps) by ``_return_one``: the same operations on
+    floats, the same bits, without numpy's per-call cost."""
+    if p_tr.size == 1:
+        return np.array([_return_one(params, float(p_tr[0]), float(tau_tr[0]), float(k_n[0]))])
     G, K2, mc = params.G, params.K2, params.mu_c
     lo = np.zeros_like(p_tr)
     hi = tau_tr / G
@@ -361,6 +364,41 @@ def _return(params: DPParams, p_tr, tau_tr, k_n):
         if np.any(np.abs(r) > 1e-10 * scale):
             raise MaterialError("material drucker-prager: the return mapping did not converge "
                                 f"in {_MAX_NEWTON} iterations (residual {float(np.max(np.abs(r))):.3e} Pa)")
+    return x
+
+
+def _return_one(params: DPParams, p_tr: float, tau_tr: float, k_n: float) -> float:
+    """``_return`` for one point, on Python floats."""
+    G, K2, mc = params.G, params.K2, params.mu_c
+    kp, dm, m0 = params.kappa_p, params.mu_p - params.mu0, params.mu0
+    lo, hi, x = 0.0, tau_tr / G, 0.0
+    scale = tau_tr + (m0 + dm * 2.0 * k_n * kp / (k_n * k_n + kp * kp)) * p_tr
+
+    def r_and_slope(x):
+        k = k_n + x
+        d = k * k + kp * kp
+        mu = m0 + dm * 2.0 * k * kp / d
+        dmu = dm * 2.0 * kp * (kp * kp - k * k) / (d * d)
+        beta = mu - mc
+        p = p_tr + K2 * beta * x
+        return tau_tr - G * x - mu * p, -G - dmu * p - mu * K2 * (beta + dmu * x)
+
+    for _ in range(_MAX_NEWTON):
+        r, dr = r_and_slope(x)
+        if r > 0:
+            lo = x
+        if r < 0:
+            hi = x
+        if abs(r) <= 4e-16 * scale or hi - lo <= 4e-16 * max(hi, 1e-300):
+            return x
+        xn = x - r / dr if dr != 0.0 else math.nan
+        if not math.isfinite(xn) or xn <= lo or xn >= hi:
+            xn = 0.5 * (lo + hi)
+        x = xn
+    r, _ = r_and_slope(x)
+    if abs(r) > 1e-10 * scale:
+        raise MaterialError("material drucker-prager: the return mapping did not converge "
+                            f"in {_MAX_NEWTON} iterations (residual {abs(r):.3e} Pa)")
     return x
 
 

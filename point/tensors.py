@@ -78,14 +78,21 @@ _MANDEL_W = np.array([1.0, 1.0, SQRT2])
 def to_mandel(t: np.ndarray) -> np.ndarray:
     """(2, 2, *batch) symmetric tensor -> (3, *batch) Mandel vector (t11, t22, sqrt 2 t12)."""
     t = np.asarray(t, dtype=float)
-    return np.stack([t[0, 0], t[1, 1], 0.5 * SQRT2 * (t[0, 1] + t[1, 0])])
+    out = np.empty((3,) + t.shape[2:])
+    out[0] = t[0, 0]
+    out[1] = t[1, 1]
+    out[2] = 0.5 * SQRT2 * (t[0, 1] + t[1, 0])
+    return out
 
 
 def from_mandel(x: np.ndarray) -> np.ndarray:
     """(3, *batch) Mandel vector -> (2, 2, *batch) symmetric tensor."""
     x = np.asarray(x, dtype=float)
-    s = x[2] / SQRT2
-    return np.stack([np.stack([x[0], s]), np.stack([s, x[1]])])
+    out = np.empty((2, 2) + x.shape[1:])
+    out[0, 0] = x[0]
+    out[1, 1] = x[1]
+    out[0, 1] = out[1, 0] = x[2] / SQRT2
+    return out
 
 
 def mandel_tangent(C: np.ndarray) -> np.ndarray:

@@ -173,3 +173,16 @@ def test_contract_check_names_the_material_and_what_failed():
         check_update_output(DP, s, d, (stress * np.nan, C, new))
     with pytest.raises(MaterialError, match="drucker-prager.*tangent of shape"):
         check_update_output(DP, s, d, (stress, C[..., 0], new))
+
+
+def test_the_return_of_one_point_is_the_vectorized_one():
+    """``_return_one`` (floats, the driver's single points) and the vectorized ``_return`` (a
+    field's points): the same operations, the same bits, on 200 random plastic trials."""
+    from point.drucker_prager import _return, _return_one
+    rng = np.random.default_rng(0)
+    pt = 3e5 + 1e5 * rng.random(200)
+    tt = 0.56 * pt + 1e4 * rng.random(200)
+    kn = 0.03 * rng.random(200)
+    v = _return(P, pt, tt, kn)
+    assert np.all(v > 0)
+    assert np.array_equal(v, [_return_one(P, a, b, c) for a, b, c in zip(pt, tt, kn)])

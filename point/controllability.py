@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .contract import material_of
+from .contract import MaterialError, Rows, material_of
 from .mixed import MixedControl, MixedControlError, mixed_step
 from .tensors import to_voigt, voigt_tangent
 
@@ -214,12 +214,32 @@ def _indicators(tan, Ainv, free):
     return det, lam[:, 0], w2
 
 
+def _rows(state, params, de):
+    """``Material.update_rows`` of the increments ``de`` (n, 3); where the law refuses some of
+    them (``MaterialError``: a state it does not describe, Drucker-Prager's apex), row by row,
+    the refused ones NaN: they lie outside the law's domain, not in the scan's answer."""
+    law = material_of(params)
+    try:
+        return law.update_rows(state, de, params)
+    except MaterialError:
+        n = de.shape[0]
+        stress, tangent = np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan)
+        for i in range(n):
+            try:
+                r = law.update_rows(state, de[i:i + 1], params)
+            except MaterialError:
+                continue
+            stress[i], tangent[i] = r.stress[0], r.tangent[0]
+        return Rows(stress, tangent, np.zeros(n, dtype=bool), {})
+
+
 def control_scan(state, params, control, de_p, s_target, t, k: int):
     """The conjugate stresses s' (n, 3) [Pa], tangents (n, 3, 3) (d sigma / d de, the kernel's
     rows) and strain increments (n, 3) of the increments from ``state`` whose controlled
     variables are ``de_p`` (3,) with e'_k = each of ``t`` (n,). With other free entries than k,
     those are solved at each point so that their s' reach ``s_target`` (3,) (``mixed.mixed_step``
-    with e'_k prescribed, from the previous point's solution; rows where it fails are NaN)."""
+    with e'_k prescribed, from the previous point's solution; rows where it fails are NaN). Rows
+    of increments the law refuses (``MaterialError``) are NaN too (``_rows``)."""
     _, A, Ainv = control.matrices()
     t = np.atleast_1d(np.asarray(t, float))
     n = t.size
@@ -228,7 +248,7 @@ def control_scan(state, params, control, de_p, s_target, t, k: int):
     ep[:, k] = t
     if not others:
         de = ep @ Ainv.T
-        rows = material_of(params).update_rows(state, de, params)
+        rows = _rows(state, params, de)
         return rows.stress @ Ainv, rows.tangent, de
     sc = list(control.strain_controlled)
     sc[k] = True
@@ -240,7 +260,7 @@ def control_scan(state, params, control, de_p, s_target, t, k: int):
         ctl = MixedControl(tuple(sc), tuple(ep[i]), (0.0, 0.0, 0.0), control.control_matrix)
         try:
             inc, de, _ = mixed_step(state, params, ctl, s_target, guess=guess)
-        except MixedControlError:
+        except (MixedControlError, MaterialError):
             continue
         sig[i] = to_voigt(inc.stress)[0] @ Ainv
         tan[i] = voigt_tangent(inc.tangent)[0]

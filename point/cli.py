@@ -216,9 +216,10 @@ def cmd_biaxial(args, stage, cli):
         print(f"point A (eta >= {args.eta_a}): eps1 = {a[0]:.4%}, q = {a[1]:.6g} Pa"
               f" ({'before' if hit[0] < k_pk else 'after'} the peak)")
     if not _no_closed_form(closed):
+        e1 = closed["peak"]["eps1"]
+        pct = lambda x: "none" if x is None else f"{x:.4%}"          # noqa: E731
         print(onsets.line("drained peak (largest q)", closed["peak"], "eta")
-              + f" at eps1 = {closed['peak']['eps1']['value']:.4%} (closed form "
-              f"{closed['peak']['eps1']['closed_form']:.4%})")
+              + f" at eps1 = {pct(e1['value'])} (closed form {pct(e1['closed_form'])})")
     print(f"wrote {args.out}/biaxial.csv, params.json, summary.json, fig4_q_eps1.png, fig5_epsv_eps1.png")
 
 
@@ -756,9 +757,9 @@ def build_parser(prog: str = "python -m point", law=None,
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
     record = law.params_type.__name__ if law is not None else None
     defaults = law.defaults_name if law is not None else "the law's defaults"
-    p0 = f"the p0 of --params FILE, else {defaults}'s " + (
-        f"{law.params_type().p0 / 1e3:g}e3" if law is not None else
-        ", ".join(f"{n}: {material_named(n).params_type().p0 / 1e3:g}e3" for n in known_laws()))
+    p0 = (f"the p0 of --params FILE, else {defaults}'s {law.params_type().p0 / 1e3:g}e3"
+          if law is not None else "the p0 of --params FILE, else the law's default (" + ", ".join(
+              f"{n}: {material_named(n).params_type().p0 / 1e3:g}e3" for n in known_laws()) + ")")
     what = f"the {_label(law)}" if law is not None else "the law"
 
     def common(p):

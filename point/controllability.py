@@ -217,11 +217,12 @@ def _indicators(tan, Ainv, free):
 def _rows(state, params, de):
     """``Material.update_rows`` of the increments ``de`` (n, 3); where the law refuses some of
     them (``MaterialError``: a state it does not describe, Drucker-Prager's apex), row by row,
-    the refused ones NaN: they lie outside the law's domain, not in the scan's answer."""
+    the refused ones NaN: they lie outside the law's domain, not in the scan's answer. Refusing
+    them all, the law's own MaterialError (it cannot go on from ``state`` at all)."""
     law = material_of(params)
     try:
         return law.update_rows(state, de, params)
-    except MaterialError:
+    except MaterialError as refused:
         n = de.shape[0]
         stress, tangent = np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan)
         for i in range(n):
@@ -230,6 +231,8 @@ def _rows(state, params, de):
             except MaterialError:
                 continue
             stress[i], tangent[i] = r.stress[0], r.tangent[0]
+        if not np.any(np.isfinite(stress[:, 0])):
+            raise refused
         return Rows(stress, tangent, np.zeros(n, dtype=bool), {})
 
 

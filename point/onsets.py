@@ -23,7 +23,8 @@ import math
 
 import numpy as np
 
-from .closed_forms import (cone_edges, det_D, h_control, h_path, h_rice, h_sym, plane_operator)
+from .closed_forms import (cone_edges, det_D, golden_section, h_control, h_path, h_rice, h_sym,
+                           plane_operator)
 from .contract import Material, material_of
 from .tensors import mandel_tangent
 
@@ -223,22 +224,9 @@ def exact_min_w2(m, n: int = 7200) -> tuple:
         y = M @ x
         return float(x @ y / np.linalg.norm(y))
     grid = 360.0 * np.arange(n) / n
-    vals = np.array([w(t) for t in grid])
-    k = int(np.argmin(vals))
-    lo, hi = grid[k] - 360.0 / n, grid[k] + 360.0 / n
-    g = 0.5 * (math.sqrt(5.0) - 1.0)
-    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-    f1, f2 = w(x1), w(x2)
-    while hi - lo > 1e-12:
-        if f1 < f2:
-            hi, x2, f2 = x2, x1, f1
-            x1 = hi - g * (hi - lo)
-            f1 = w(x1)
-        else:
-            lo, x1, f1 = x1, x2, f2
-            x2 = lo + g * (hi - lo)
-            f2 = w(x2)
-    return (f1, x1 % 360.0) if f1 < f2 else (f2, x2 % 360.0)
+    k = int(np.argmin([w(t) for t in grid]))
+    t, least = golden_section(w, grid[k] - 360.0 / n, grid[k] + 360.0 / n, 1e-12)
+    return least, t % 360.0
 
 
 def _nearest(got, exact):

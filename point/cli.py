@@ -42,8 +42,7 @@ from .driver import (MixedControlError, drained_biaxial, isotropic_state, propor
 from .experiment import (DOMAIN_COLUMNS, DOMAIN_EPS1_MAX, absent_outputs, biaxial_columns,
                          biaxial_test, bifurcation_domain, compile_kernels, directional_analysis,
                          present, probe_columns)
-from .params import (DEFAULT_LAW, add_param_options, known_laws, params_from, record_params,
-                     save_params)
+from .params import add_param_options, known_laws, params_from, record_params, save_params
 from .probes import arcs, cone_edges, format_arcs
 
 # memory of one step of a path [bytes]: run_path's histories (3 + 3 floats, 3 ints), the

@@ -30,7 +30,7 @@ from hmodel import HParams
 from point import contract
 from point.cli import main
 from point.contract import MaterialError
-from point.drucker_prager import DPParams, DPState, DruckerPrager
+from point.drucker_prager import DPParams, DruckerPrager
 from point.experiment import biaxial_columns, biaxial_test
 from point.params import load_params
 from point.tensors import mandel_tangent
@@ -227,7 +227,9 @@ class NoEps(NamedTuple):
 class Broken(DruckerPrager):
     """Drucker-Prager with one bug: 'tangent' (an entry of the tangent 30 % off), 'nan' (a NaN
     stress), 'shape' (the tangent as a Mandel matrix (3, 3), not (2, 2, 2, 2)), 'no-eps' (a new
-    state without eps), 'refuses' (a MaterialError once eps11 passes 0.4 %)."""
+    state without eps), 'refuses' (a MaterialError once eps11 passes 0.4 %), 'refuses-p' (once
+    p passes 600 kPa: a region of the stress the law does not describe, as Drucker-Prager's
+    apex)."""
 
     def __init__(self, bug, record):
         self.bug, self.name, self.params_type = bug, f"broken-{bug}", record
@@ -246,6 +248,8 @@ class Broken(DruckerPrager):
             new = NoEps(new.stress, new.eps_p, new.kappa, new.plastic)
         elif self.bug == "refuses" and np.any(new.eps[0, 0] > 0.004):
             raise MaterialError(f"material {self.name}: refused past eps11 = 0.4 % (the bug)")
+        elif self.bug == "refuses-p" and np.any(new.stress[0, 0] + new.stress[1, 1] > 1.2e6):
+            raise MaterialError(f"material {self.name}: refused past p = 600 kPa (the bug)")
         return stress, tangent, new
 
 
@@ -319,6 +323,21 @@ def test_a_material_error_inside_a_run_keeps_the_finished_part(broken, tmp_path,
     assert all(np.all(np.isfinite(v)) for v in c.values())
     assert json.loads((out / "params.json").read_text())["model"] == "broken-refuses"
 
+
+
+def test_a_region_the_law_refuses_ends_the_path_with_its_refusal(broken, tmp_path, capsys):
+    """The drained path at 400 kPa runs into stresses the law refuses (p > 600 kPa): the driver
+    cuts the step, decides it (``controllability.decide``: the refused increments left out of the
+    scan), finds no static state among those the law accepts, and ends the path with the law's
+    own refusal: exit 2 (not 1, a Newton failure), the rows before written complete."""
+    out = tmp_path / "b"
+    code, _, err = _run(["biaxial", "--model", broken("refuses-p"), "--sigma2", "400e3",
+                         "--d-eps1", "1e-4", "--quiet", "--out", out], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith("error: material broken-refuses-p: refused past p = 600 kPa") and \
+        "among the increments it refuses" in err[0] and "written complete: biaxial.csv (" in err[0]
+    c = read_csv(out / "biaxial.csv")
+    assert len(c["p"]) > 10 and c["p"][-1] < 6e5 and np.all(np.isfinite(c["q"]))
 
 
 def test_a_material_error_in_the_domain_keeps_the_pressures_finished(tmp_path, capsys,

@@ -1,13 +1,14 @@
-"""What the hmodel, fem and dem command lines (and the cross-check's) share: one vocabulary of
-options, one-line errors, checked option types, output folders and memory checked before any
-computation, Ctrl-C / SIGTERM as one line. The options of the H-model's parameters (--params
-FILE with the options on top, docs/parameters.md) are the H-model's: ``hmodel.params``
-(``add_param_options``, ``params_from``, ``record_params``), dem's ``dem.params``.
+"""What the point, hmodel, fem and dem command lines (and the cross-check's) share: one
+vocabulary of options, one-line errors, checked option types, output folders and memory checked
+before any computation, Ctrl-C / SIGTERM as one line. The options of a law's parameters
+(--params FILE with the options on top, docs/parameters.md) are the material point's:
+``point.params`` (``add_param_options``, ``params_from``, ``record_params``; ``hmodel.params``
+the H-model's), dem's ``dem.params``.
 
-The vocabulary (``VOCABULARY``, issue 32) is written once: every option of the three parts, by
+The vocabulary (``VOCABULARY``, issue 32) is written once: every option of the parts, by
 name, with the quantity it is (in the paper's symbols), its unit, its kind and the range the
 parser checks, the record fields that check it where a command binds it to its record
-(``HParams``, ``DemParams``, ``BurstOptions``, ``ProbeOptions``, ``CalibrationOptions``,
+(``HParams``, ``DPParams``, ``DemParams``, ``BurstOptions``, ``ProbeOptions``, ``CalibrationOptions``,
 ``BiaxialConfig``, ``BurstConfig``, ``Specimen``, ``Dynamics``: their validation gives the range,
 once, and the library's entry point calls the same validation; the command names the option with
 ``record_error``), and its former names (refused with "did you mean" the new one). The parsers
@@ -252,7 +253,8 @@ class Term:
 
 
 _T = Term
-# Every option of python -m hmodel, fem and dem, once (the parsers are built from it: ``add``).
+# Every option of python -m point, hmodel, fem and dem, once (the parsers are built from it:
+# ``add``).
 VOCABULARY = {t.name: t for t in (
     # -- where a command reads and writes, how it runs ----------------------------------------
     _T("--out", "where the command writes", None, "path"),
@@ -294,6 +296,24 @@ VOCABULARY = {t.name: t for t in (
     _T("--fabric-a", "fabric anisotropy a of omega(theta) = (1 + a cos 2(theta - b)) / n_dir",
        "-", fields=("HParams.fabric_a",)),
     _T("--fabric-b", "fabric direction b", "deg", fields=("HParams.fabric_b",)),
+    # -- the material point of any law (python -m point) -----------------------------------------
+    _T("--model", "constitutive law of the material point (a parameter file's \"model\")", None,
+       "choice"),
+    _T("--check-tangent", "before the run, the law's tangent against central differences of its "
+       "own stress at the isotropic state and at a loaded state: refused if they disagree", None,
+       "flag"),
+    # -- non-associated Drucker-Prager's parameters (point.drucker_prager): checked by DPParams --
+    _T("--shear-modulus", "shear modulus G of the isotropic elasticity", "Pa",
+       fields=("DPParams.G",)),
+    _T("--nu", "Poisson's ratio nu of plane strain (plane bulk modulus G / (1 - 2 nu))", "-",
+       fields=("DPParams.nu",)),
+    _T("--mu0", "mobilized friction mu0 = tau/p at the first yield", "-",
+       fields=("DPParams.mu0",)),
+    _T("--mu-p", "peak mobilized friction mu_p", "-", fields=("DPParams.mu_p",)),
+    _T("--kappa-p", "plastic shear strain kappa_p at the peak of the friction", "-",
+       fields=("DPParams.kappa_p",)),
+    _T("--mu-c", "characteristic friction mu_c of the dilatancy rule beta = mu - mu_c "
+       "(contraction below it, dilation above)", "-", fields=("DPParams.mu_c",)),
     # -- the DEM's parameters (the paper's set): checked by DemParams ----------------------------
     _T("--n", "number of disks", "-", "int", 1, 10_000_000, False, False,
        fields=("DemParams.n",)),
@@ -316,7 +336,8 @@ VOCABULARY = {t.name: t for t in (
        "> 0)", "-", fields=("DemParams.rolling_stiffness",)),
     # -- the loading ---------------------------------------------------------------------------
     _T("--sigma2", "confining (lateral) stress sigma2, the isotropic start's p0", "Pa", "real",
-       0, 1e9, hi_open=False, fields=("HParams.p0", "CalibrationOptions.confining"),
+       0, 1e9, hi_open=False,
+       fields=("HParams.p0", "DPParams.p0", "CalibrationOptions.confining"),
        old=(("--confining", ()),)),
     _T("--eps1-max", "axial strain eps1 where the drained test ends", "-", "real", 0, 0.5,
        fields=("BiaxialConfig.eps1_max", "CalibrationOptions.eps_max"), old=(("--eps-max", ()),)),
@@ -861,7 +882,7 @@ def folder_owner(path):
     try:
         with open(os.path.join(path, "params.json")) as f:
             note = json.load(f).get("note", "")
-        m = re.match(r"(python -m (?:hmodel|fem|dem) [a-z]+)\b", note or "")
+        m = re.match(r"(python -m (?:hmodel|point|fem|dem) [a-z]+)\b", note or "")
         if m:
             return m.group(1)
     except (OSError, ValueError, AttributeError, TypeError):

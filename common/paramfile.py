@@ -1,7 +1,9 @@
-"""Parameter files: one JSON format for the H-model's ``HParams`` and the DEM's ``DemParams``
-(docs/parameters.md), read and written here for both (hmodel.params and dem.params).
+"""Parameter files: one JSON format for the parameter record of every law of the material point
+(the H-model's ``HParams``, Drucker-Prager's ``DPParams``: ``point.params``) and the DEM's
+``DemParams`` (docs/parameters.md), read and written here for all (point.params, hmodel.params
+and dem.params).
 
-A file is one JSON object: ``"model"`` ("hmodel" or "dem"), every field of the parameter record
+A file is one JSON object: ``"model"`` ("hmodel", "drucker-prager" or "dem"), every field of the parameter record
 by its own name with its value in SI units (angles in degrees), ``"units"`` (field -> unit, a
 record for the reader: the values are never converted) and an optional ``"note"`` (free text)::
 
@@ -82,22 +84,24 @@ def _typed(key, v, kind, unit):
 
 
 def read_params(path, cls, model: str, units: dict, build=None, option: str = "--params",
-                migrate=None):
+                migrate=None, writer: str | None = None):
     """The record of class ``cls`` in the parameter file ``path``, built by ``build(values)``
     (default ``cls(**values)``, whose validation gives the ranges). ``migrate(doc)``: the
     file's object with keys renamed since under their new names (an old file still loads).
-    Every refusal is a ValueError of one line starting ``"{option} {path}: "`` and naming the
-    key."""
+    ``writer``: the command that writes such a file, as the messages name it (default
+    ``python -m {model} params``). Every refusal is a ValueError of one line starting
+    ``"{option} {path}: "`` and naming the key."""
     head = f"{option} {path}"
+    writer = writer or f"python -m {model} params"
     if os.path.isdir(path):
-        raise ValueError(f"{head}: is a folder: allowed a parameter file (JSON; python -m {model} "
-                         "params --out FILE writes one)")
+        raise ValueError(f"{head}: is a folder: allowed a parameter file (JSON; {writer} "
+                         "--out FILE writes one)")
     try:
         with open(path) as f:
             text = f.read()
     except OSError as e:
         raise ValueError(f"{head}: {(e.strerror or str(e)).lower()}: allowed a parameter file "
-                         f"(JSON; python -m {model} params --out FILE writes one)") from None
+                         f"(JSON; {writer} --out FILE writes one)") from None
     except UnicodeDecodeError:
         raise ValueError(f"{head}: not JSON (not text)") from None
     try:
@@ -109,10 +113,10 @@ def read_params(path, cls, model: str, units: dict, build=None, option: str = "-
         doc = migrate(doc)
     if not isinstance(doc, dict):
         raise ValueError(f"{head}: allowed a JSON object of the {cls.__name__} fields "
-                         f"(python -m {model} params --out FILE writes one)")
+                         f"({writer} --out FILE writes one)")
     if "model" in doc and doc["model"] != model:
         raise ValueError(f"{head}: model = {json.dumps(doc['model'])}: allowed \"{model}\" "
-                         f"(a file of python -m {model} params)")
+                         f"(a file of {writer})")
     unknown = [k for k in doc if k not in kinds and k not in RESERVED]
     if unknown:
         raise ValueError(f"{head}: unknown key {unknown[0]!r}: allowed the {cls.__name__} fields "
@@ -120,7 +124,7 @@ def read_params(path, cls, model: str, units: dict, build=None, option: str = "-
     missing = [k for k in kinds if k not in doc]
     if missing:
         raise ValueError(f"{head}: missing key {missing[0]!r}: every {cls.__name__} field is "
-                         f"required (python -m {model} params --out FILE writes them all)")
+                         f"required ({writer} --out FILE writes them all)")
     if "note" in doc and not isinstance(doc["note"], str):
         raise ValueError(f"{head}: note = {json.dumps(doc['note'])}: allowed a string")
     if "units" in doc:

@@ -287,35 +287,11 @@ def main(argv=None) -> int:
 
 
 def read_any_params(path, option: str = "--params"):
-    """The parameter record of the file ``path`` of any registered law: its "model" names the
-    law (a file without it is the H-model's, as files were before the key), read strictly by
-    ``common.paramfile.read_params`` with that law's record and units (the H-model's by
-    ``hmodel.params.load_params``). ValueError of one line naming the file and the key."""
-    import json
-    from common.paramfile import read_params
-    from point.contract import MaterialError, ParamError, material_named
-    model = "hmodel"
-    try:
-        with open(path) as f:
-            doc = json.load(f)
-        if isinstance(doc, dict) and "model" in doc:
-            model = doc["model"]
-    except (OSError, ValueError):
-        pass                     # read_params says what is wrong with the file
-    if model == "hmodel":
-        return hp.load_params(path, option)
-    try:
-        law = material_named(model)
-    except (MaterialError, TypeError) as e:      # "no material named ...: allowed ..."
-        allowed = str(e).split(": ", 1)[-1] if isinstance(e, MaterialError) else "a law's name"
-        raise ValueError(f"{option} {path}: model = {json.dumps(model)}: {allowed}") from None
-
-    def build(values):
-        try:
-            return law.params_type(**values)
-        except ParamError as e:
-            raise ValueError(f"{e.name} = {e.value!r} is out of range: allowed {e.allowed}") from None
-    return read_params(path, law.params_type, law.name, law.units, build, option)
+    """The parameter record of the file ``path`` of any registered law (its "model" names the
+    law; a file without it is the H-model's): ``point.params.load_params``, the one loader.
+    ValueError of one line naming the file and the key."""
+    from point.params import load_params
+    return load_params(path, option)
 
 
 def _specimen_config(args) -> BiaxialConfig:

@@ -44,6 +44,8 @@ class HModel(Material):
     # the tangent of a step is the exact derivative of its stress, piecewise constant for a fixed
     # sliding pattern: the rate tangent at the state the step reaches, on the step's branch
     tangent_is_rate = True
+    label = "H-model"
+    defaults_name = "Table I"
 
     def initial_state(self, params: HParams, batch_shape: tuple = ()) -> HState:
         """From d1 = d2 = 2 r_g, alpha = alpha0 compressed isotropically to p0 (MixedControlError
@@ -146,6 +148,11 @@ class HModel(Material):
                 "N2": [float(N2[c, i]) for c, i in zip(closed, diff)],
                 "alpha": [float(np.degrees(al[c, i])) for c, i in zip(closed, diff)],
                 "opens": opens, "via": via, "count": int(diff.size)}
+
+    def fit_space(self):
+        """What a fit of the H-model frees, and how (``hmodel.fit.SPACE``)."""
+        from .fit import SPACE
+        return SPACE
 
     def kernels(self) -> tuple:
         """The Numba kernels a first run compiles (``point.experiment.compile_kernels``)."""

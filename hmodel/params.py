@@ -4,13 +4,12 @@ from __future__ import annotations
 import argparse
 import math
 import numbers
-import os
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from common import options as opt
-from common.options import VOCABULARY, OptionError, option_of
+from point import params as _pp
+from point.contract import ParamError as _ContractParamError, material_named
 
 __all__ = ["HParams", "ParamError", "UNITS", "load_params", "save_params", "add_param_options",
            "params_from", "record_params", "param_option_error", "PARAM_OPTIONS"]
@@ -53,6 +52,9 @@ class HParams:
     fabric_a: float = 0.0
     fabric_b: float = 0.0
     _h: float = field(init=False, repr=False, compare=False, default=0.0)
+
+    # what a field's None stands for (the options' help: "null (2 r_g)")
+    none_means = {"thickness": "2 r_g"}
 
     def __post_init__(self):
         for f in fields(self):
@@ -119,13 +121,13 @@ class HParams:
         return HParams(**kw)
 
 
-class ParamError(ValueError):
+class ParamError(_ContractParamError):
     """An HParams field out of range: ``name`` (the field), ``value``, ``allowed`` (the range, as
-    text), so that a command line can name its own option instead of the field."""
+    text), so that a command line can name its own option instead of the field (the contract's
+    ``point.ParamError`` of this record: a command line of any law catches it so)."""
 
     def __init__(self, name, value, allowed, message=None):
-        self.name, self.value, self.allowed = name, value, allowed
-        super().__init__(message or f"HParams.{name} = {value!r} is out of range: allowed {allowed}")
+        super().__init__(name, value, allowed, message, record="HParams")
 
 
 def _check(ok, name, allowed, value):
@@ -133,81 +135,44 @@ def _check(ok, name, allowed, value):
         raise ParamError(name, value, allowed)
 
 
+# -- the parameter file and the command-line options: those of any law (``point.params``), for
+# the H-model alone
+def _law():
+    return material_named("hmodel")
+
+
 def save_params(path, params: HParams, note: str | None = None) -> None:
     """Write ``params`` as a parameter file (docs/parameters.md; ``thickness`` null: 2 r_g)."""
-    from common.paramfile import write_params
-    write_params(path, params, "hmodel", UNITS, note)
+    _pp.save_params(path, params, note)
 
 
 def load_params(path, option: str = "--params") -> HParams:
     """The HParams of a parameter file; ValueError of one line naming the file and the key."""
-    from common.paramfile import read_params
-
-    def build(values):
-        try:
-            return HParams(**values)
-        except ParamError as e:
-            raise ValueError(f"{e.name} = {e.value!r} is out of range: allowed {e.allowed}") from None
-    return read_params(path, HParams, "hmodel", UNITS, build, option)
+    return _pp.load_params(path, option, law=_law())
 
 
-# -- the command-line options of the parameters (the options themselves: common.options) --------
 def param_option_error(e, options=None):
     """The OptionError of an HParams ``ParamError`` ``e``, naming the command-line option of the
     field (``--phi-g`` for phi_g, ``--sigma2`` for p0, or ``options[field]``)."""
-    opt = (options or {}).get(e.name) or option_of("HParams", e.name)
-    return OptionError(f"{opt} {e.value!r} is out of range: allowed {e.allowed}")
+    return _pp.param_option_error(e, "HParams", options)
 
 
 # the options of the HParams fields (p0 is the confining stress of a test: --sigma2)
-PARAM_OPTIONS = tuple((t.name, f.split(".", 1)[1]) for t in VOCABULARY.values() for f in t.fields
-                      if f.startswith("HParams.") and f != "HParams.p0")
+PARAM_OPTIONS = _pp.record_options("HParams")
 
 
-def add_param_options(ap: argparse.ArgumentParser,
-                      file_note: str = "of the H-model: python -m hmodel params --out FILE"):
-    """--params FILE (``file_note``: what file it takes) and an option for every HParams field
-    but p0 (the commands' --sigma2), all None unless given: the file (or Table I) supplies the
-    rest (``params_from``), HParams checks them."""
-    d = HParams()
-    g = ap.add_argument_group("model parameters (Table I unless --params FILE; an option given "
-                              "overrides the file)")
-    opt.add(g, "--params", metavar="FILE", note=file_note, default_text="Table I")
-    for option, name in PARAM_OPTIONS:
-        opt.add(g, option, record="HParams", metavar=name.upper(),
-            default_text=f"the file's, else Table I's "
-                         f"{'null (2 r_g)' if getattr(d, name) is None else format(getattr(d, name), 'g')}")
+def add_param_options(ap: argparse.ArgumentParser, file_note: str | None = None):
+    """--params FILE (``file_note``: what file it takes, default the H-model's) and an option
+    for every HParams field but p0 (the commands' --sigma2), all None unless given: the file (or
+    Table I) supplies the rest (``params_from``), HParams checks them."""
+    _pp.add_param_options(ap, _law(), file_note=file_note)
 
 
 def params_from(args, p0=None, base=None):
     """The HParams of a command: the --params file (or Table I; ``base``: the file's record
-    already read), then the options given on top;
-    p0 is ``p0`` if given, else --sigma2 when given as one value (the confining stress of the
-    test: it overrides the file's p0), else the file's. Sets ``args.params_note``, the line of
-    the run's summary that says where the values came from ("parameters: the file p.json;
-    --phi-g 25 overrides the file's phi_g 20"). A bad file or an option out of range is a
-    ValueError (OptionError) of one line naming the key or the option."""
-    from common.paramfile import override
-    path = getattr(args, "params", None)
-    if base is None:
-        base = load_params(path) if path else HParams()
-    given = [(o, n, getattr(args, n)) for o, n in PARAM_OPTIONS if getattr(args, n, None) is not None]
-    sigma2 = getattr(args, "sigma2", None)
-    if p0 is not None:
-        given.append(("p0", "p0", float(p0)))
-    elif isinstance(sigma2, (int, float)):
-        given.append(("--sigma2", "p0", float(sigma2)))
-    try:
-        P, note = override(base, given, f"the file {path}" if path else "Table I (defaults)",
-                           base.replace)
-    except ParamError as e:
-        raise param_option_error(e) from None
-    args.params_note = note
-    return P
+    already read), then the options given on top (``point.params.params_from`` of the H-model:
+    it sets ``args.params_note``)."""
+    return _pp.params_from(args, _law(), p0, base=base)
 
 
-def record_params(out_dir, params, note="") -> str:
-    """Write ``params`` to ``out_dir``/params.json (the --params format: the run repeats with
-    ``--params out_dir/params.json``); returns the file name."""
-    save_params(os.path.join(out_dir, "params.json"), params, note)
-    return "params.json"
+record_params = _pp.record_params

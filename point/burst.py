@@ -266,7 +266,8 @@ def static_check(state, params, ratio: float, c_target: float,
     [-scan_strain, scan_strain] (n_scan values, each deciding its own sliding pattern,
     ``controllability.control_scan``): below ``c_target``, no strain along the tie within the
     bracket reaches it, so the Newton failure is the absence of a static solution, not a bad
-    start. ``d_eps1`` of the converged step. Where Newton fails, ``verdict`` is the decision of
+    start (an increment the law refuses, ``MaterialError``, is left out of the scan). ``d_eps1``
+    of the converged step. Where Newton fails, ``verdict`` is the decision of
     ``controllability.decide`` ('uncontrollable' past the c peak: W2 = d eps1 dc = 0 there, the
     block dc/d eps1 changing sign) and ``verdict_line`` its words; 'exists' where it converged."""
     ctl = proportional_strain_stress(ratio)
@@ -282,7 +283,7 @@ def static_check(state, params, ratio: float, c_target: float,
         out.update(verdict=v.outcome, verdict_line=verdict_text(v, "c"))
     e = np.linspace(-scan_strain, scan_strain, n_scan)
     c = control_scan(state, params, ctl, np.zeros(3), target, e, 0)[0][:, 0]
-    k = int(np.argmax(c))
+    k = int(np.nanargmax(c))          # NaN: an increment the law refuses (controllability._rows)
     out.update(c_max_scan=float(c[k]), d_eps1_c_max=float(e[k]), scan_strain=float(scan_strain))
     return out
 
@@ -539,7 +540,9 @@ def run_burst(params, ratios, start_fractions, dc: float, specimen: Specimen = S
     and each R, the proportional path, its c peak, the ``below`` and ``past`` switches (each
     checked statically and held dynamically at c_switch + dc). ``d_eps1``: the axial strain step
     of the drained path, ``path_d_eps1`` the proportional paths' (None: ``d_eps1``).
-    ``progress``: None or a callable taking one line of text."""
+    ``progress``: None or a callable taking one line of text. Failed (an exception), the runs
+    finished (complete rows, histories and paths) ride on the exception as ``.partial``, a
+    BurstResult (None before the drained peak is known)."""
     t0 = time.perf_counter()
     pd_eps1 = d_eps1 if path_d_eps1 is None else path_d_eps1
     for R in ratios:
@@ -559,9 +562,29 @@ def run_burst(params, ratios, start_fractions, dc: float, specimen: Specimen = S
             raise ValueError(f"{name} = {v!r} is out of range: allowed a finite "
                              f"{r.text(name, unit=True)}")
     say = progress or (lambda s: None)
-    eta_peak, drained = drained_peak_eta(params, d_eps1)
+    try:
+        eta_peak, drained = drained_peak_eta(params, d_eps1)
+    except BaseException as e:
+        e.partial = None
+        raise
     say(f"drained path: peak eta = {eta_peak:.4f}")
     rows, hists, paths = [], [], []
+    try:
+        _burst_runs(params, ratios, fr, dc, specimen, dynamics, d_eps1, path_strain, pd_eps1,
+                    eta_peak, say, rows, hists, paths)
+    except BaseException as e:
+        # the runs finished: complete rows with their histories, and the paths they came from
+        done = {(r["ratio"], r["start_fraction"]) for r in rows}
+        e.partial = BurstResult(rows, hists, [p for p in paths if (p.ratio, p.start_fraction)
+                                                in done], eta_peak, drained,
+                                time.perf_counter() - t0)
+        raise
+    return BurstResult(rows, hists, paths, eta_peak, drained, time.perf_counter() - t0)
+
+
+def _burst_runs(params, ratios, fr, dc, specimen, dynamics, d_eps1, path_strain, pd_eps1,
+                eta_peak, say, rows, hists, paths):
+    """The runs of ``run_burst``, appended to ``rows``, ``hists`` and ``paths`` as they finish."""
     for f in fr:
         r0, s0 = state_at_eta(params, f * eta_peak, params.p0, d_eps1)
         eta0 = float(r0.invariants()[2][-1])
@@ -620,7 +643,6 @@ def run_burst(params, ratios, start_fractions, dc: float, specimen: Specimen = S
                     f"{row['steps']} steps ({row['t_end']:.4g} s, T1 = {run.T1:.3g} s), {rel} "
                     f"(largest {row['ke_w2ext_max']:.3g} x W2_ext)"
                     + (f"; {run.failure_reason}" if run.failure_reason else ""))
-    return BurstResult(rows, hists, paths, eta_peak, drained, time.perf_counter() - t0)
 
 
 def cone_entries(params, ratios, d_eps1: float = 1e-5, check_every: int = 25,

@@ -30,7 +30,7 @@ import numpy as np
 
 __all__ = ["Mechanism", "h_sym", "h_strain_subspace", "h_stress_subspace",
            "h_control", "h_path", "h_rice", "rice_h_of_angle", "cone_edges", "plane_operator",
-           "voigt_to_mandel_matrix", "det_D", "mandel_of_voigt"]
+           "voigt_to_mandel_matrix", "det_D", "mandel_of_voigt", "golden_section"]
 
 _I = np.array([1.0, 1.0, 0.0])
 SQRT2 = math.sqrt(2.0)
@@ -191,15 +191,21 @@ def h_rice(m: Mechanism, n_grid: int = 720) -> tuple[float, float]:
     a = np.pi * np.arange(n_grid) / n_grid
     v = rice_h_of_angle(m, a)
     k = int(np.argmax(v))
-    lo, hi = a[k] - np.pi / n_grid, a[k] + np.pi / n_grid
+    x, f = golden_section(lambda x: -float(rice_h_of_angle(m, [x])[0]),
+                          a[k] - np.pi / n_grid, a[k] + np.pi / n_grid, 1e-15)
+    return max(-f, float(v[k])), float(np.degrees(x) % 180.0)
+
+
+def golden_section(f, lo: float, hi: float, tol: float, max_iter: int = 200) -> tuple:
+    """(x, f(x)) of the least of a unimodal ``f`` in [lo, hi] by golden section, to a bracket
+    of width ``tol`` (or ``max_iter`` steps): the better of the last two points."""
     g = 0.5 * (math.sqrt(5.0) - 1.0)
-    f = lambda x: float(rice_h_of_angle(m, [x])[0])      # noqa: E731
     x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
     f1, f2 = f(x1), f(x2)
-    for _ in range(200):
-        if hi - lo < 1e-15:
+    for _ in range(max_iter):
+        if hi - lo < tol:
             break
-        if f1 > f2:
+        if f1 < f2:
             hi, x2, f2 = x2, x1, f1
             x1 = hi - g * (hi - lo)
             f1 = f(x1)
@@ -207,8 +213,7 @@ def h_rice(m: Mechanism, n_grid: int = 720) -> tuple[float, float]:
             lo, x1, f1 = x1, x2, f2
             x2 = lo + g * (hi - lo)
             f2 = f(x2)
-    x = x1 if f1 > f2 else x2
-    return max(f1, f2, float(v[k])), float(np.degrees(x) % 180.0)
+    return (x1, f1) if f1 < f2 else (x2, f2)
 
 
 def plane_operator(D_mandel, plane: str) -> np.ndarray:

@@ -43,7 +43,8 @@ import numpy as np
 from .tensors import from_voigt, mandel_tangent, tangent_from_voigt, to_voigt, voigt_tangent
 
 __all__ = ["Material", "MaterialError", "ParamError", "register", "material_of", "material_named",
-           "MATERIALS", "Rows", "check_tangent", "TangentCheck", "check_update_output"]
+           "MATERIALS", "Rows", "check_tangent", "TangentCheck", "check_update_output",
+           "check_law"]
 
 
 class MaterialError(ValueError):
@@ -118,7 +119,9 @@ def material_of(params) -> "Material":
 class Material:
     """A constitutive law of the plane (module docstring). Subclasses set ``name``,
     ``params_type``, ``units`` (field -> unit) and implement ``initial_state`` and ``update``;
-    the rest has defaults that a law may override."""
+    the rest has defaults that a law may override. ``label``: its name in figures and prose
+    (default ``name``); ``defaults_name``: where its default record comes from, as the command
+    lines say it ("Table I", "the benchmark set")."""
 
     name: str = ""
     params_type: type = None
@@ -132,6 +135,8 @@ class Material:
     # they are computed from ``rate_tangent`` at the state reached, in the step's direction (the
     # Drucker-Prager's D_alg differs from its D by O(G d lambda / tau)).
     tangent_is_rate: bool = False
+    label: str = ""                 # its name in figures and prose ("H-model"); default ``name``
+    defaults_name: str = "the defaults"     # where its default record comes from ("Table I")
 
     # -- what every law implements ----------------------------------------------------------
     def initial_state(self, params, batch_shape: tuple = ()):
@@ -294,6 +299,7 @@ class TangentCheck(NamedTuple):
     step: float
     ok: bool
     worst: tuple
+    tol: float = 1e-5
 
 
 def check_tangent(material: Material, state, params, d_eps, rel_step: float = 1e-6,
@@ -321,4 +327,49 @@ def check_tangent(material: Material, state, params, d_eps, rel_step: float = 1e
         a = int(np.argmax(diff))
         if diff[a] > err:
             err, worst = float(diff[a]), (a, b)
-    return TangentCheck(err, h, err <= tol, worst)
+    return TangentCheck(err, h, err <= tol, worst, tol)
+
+
+# a step of the drained path's direction (axial compression, lateral extension): the increment
+# ``check_law`` updates the law with, and the direction of its loaded state
+CHECK_STEP = np.diag([1e-5, -0.3e-5])
+# the loaded state of ``check_law``: this many strain-controlled steps of LOAD_STEP from the
+# isotropic state (axial strain 0.5 %: Drucker-Prager's default set yields at 0.03 %, the
+# H-model's Table I hexagons slide from the start)
+LOAD_STEPS = 10
+LOAD_STEP = np.diag([5e-4, -1.5e-4])
+
+
+def check_law(material: Material, params, tangent: bool = False) -> list:
+    """Hold a law to its contract before a command uses it: its isotropic state has ``stress``
+    and ``eps`` (2, 2); the first update of the command (``CHECK_STEP`` from it, single point)
+    and the same update of a batch of two points pass ``check_update_output``. With ``tangent``:
+    ``check_tangent`` at the isotropic state and at a loaded state (``LOAD_STEPS`` steps of
+    ``LOAD_STEP``), each for the increment ``CHECK_STEP``. A failure is a MaterialError of one
+    line naming the material and what failed. Returns [(where, TangentCheck)] of the tangent's
+    checks ([] without ``tangent``)."""
+    name = material.name or type(material).__name__
+    s0 = material.initial_state(params)
+    for f in ("stress", "eps"):
+        if np.shape(getattr(s0, f, None)) != (2, 2):
+            raise MaterialError(f"material {name}: its isotropic state has no field {f} of shape "
+                                "(2, 2) (the contract's state records stress and eps)")
+    check_update_output(material, s0, CHECK_STEP, material.update(s0, CHECK_STEP, params))
+    two = material.broadcast(s0, (2,))
+    d2 = np.stack([CHECK_STEP, 2.0 * CHECK_STEP], axis=-1)
+    check_update_output(material, two, d2, material.update(two, d2, params))
+    if not tangent:
+        return []
+    loaded = s0
+    for _ in range(LOAD_STEPS):
+        loaded = material.update(loaded, LOAD_STEP, params)[2]
+    out = []
+    for where, st in (("the isotropic state", s0), ("a loaded state", loaded)):
+        c = check_tangent(material, st, params, CHECK_STEP)
+        if not c.ok:
+            raise MaterialError(
+                f"material {name}: --check-tangent: the tangent update returns disagrees with "
+                f"central differences of its own stress at {where}: relative error {c.error:.3g} "
+                f"(Mandel entry {c.worst}, step {c.step:.3g}), allowed <= {c.tol:g}")
+        out.append((where, c))
+    return out

@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .contract import material_of
+from .contract import MaterialError, Rows, material_of
 from .mixed import MixedControl, MixedControlError, mixed_step
 from .tensors import to_voigt, voigt_tangent
 
@@ -214,12 +214,39 @@ def _indicators(tan, Ainv, free):
     return det, lam[:, 0], w2
 
 
-def control_scan(state, params, control, de_p, s_target, t, k: int):
+def _rows(state, params, de, refusals=None):
+    """``Material.update_rows`` of the increments ``de`` (n, 3); where the law refuses some of
+    them (``MaterialError``: a state it does not describe, Drucker-Prager's apex), row by row,
+    the refused ones NaN: they lie outside the law's domain, not in the scan's answer (the
+    refusal appended to ``refusals``). Refusing them all, the law's own MaterialError (it cannot
+    go on from ``state`` at all)."""
+    law = material_of(params)
+    try:
+        return law.update_rows(state, de, params)
+    except MaterialError as refused:
+        n = de.shape[0]
+        stress, tangent = np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan)
+        for i in range(n):
+            try:
+                r = law.update_rows(state, de[i:i + 1], params)
+            except MaterialError:
+                continue
+            stress[i], tangent[i] = r.stress[0], r.tangent[0]
+        if not np.any(np.isfinite(stress[:, 0])):
+            raise refused
+        if refusals is not None:
+            refusals.append(refused)
+        return Rows(stress, tangent, np.zeros(n, dtype=bool), {})
+
+
+def control_scan(state, params, control, de_p, s_target, t, k: int, refusals=None):
     """The conjugate stresses s' (n, 3) [Pa], tangents (n, 3, 3) (d sigma / d de, the kernel's
     rows) and strain increments (n, 3) of the increments from ``state`` whose controlled
     variables are ``de_p`` (3,) with e'_k = each of ``t`` (n,). With other free entries than k,
     those are solved at each point so that their s' reach ``s_target`` (3,) (``mixed.mixed_step``
-    with e'_k prescribed, from the previous point's solution; rows where it fails are NaN)."""
+    with e'_k prescribed, from the previous point's solution; rows where it fails are NaN). Rows
+    of increments the law refuses (``MaterialError``) are NaN too (``_rows``; the refusals
+    appended to ``refusals``)."""
     _, A, Ainv = control.matrices()
     t = np.atleast_1d(np.asarray(t, float))
     n = t.size
@@ -228,7 +255,7 @@ def control_scan(state, params, control, de_p, s_target, t, k: int):
     ep[:, k] = t
     if not others:
         de = ep @ Ainv.T
-        rows = material_of(params).update_rows(state, de, params)
+        rows = _rows(state, params, de, refusals)
         return rows.stress @ Ainv, rows.tangent, de
     sc = list(control.strain_controlled)
     sc[k] = True
@@ -241,6 +268,10 @@ def control_scan(state, params, control, de_p, s_target, t, k: int):
         try:
             inc, de, _ = mixed_step(state, params, ctl, s_target, guess=guess)
         except MixedControlError:
+            continue
+        except MaterialError as refused:
+            if refusals is not None:
+                refusals.append(refused)
             continue
         sig[i] = to_voigt(inc.stress)[0] @ Ainv
         tan[i] = voigt_tangent(inc.tangent)[0]
@@ -273,11 +304,12 @@ class _Scan:
         self.T = float(s_target[k])
         _, _, self.Ainv = control.matrices()
         self.free = [i for i in range(3) if not control.strain_controlled[i]]
+        self.refusals = []          # the law's refusals of increments of the scan (``_rows``)
 
     def rows(self, t):
         """(g = s'_k - target (n,), tangents (n, 3, 3), strain increments (n, 3)) at e'_k = t."""
         s, tan, de = control_scan(self.state, self.params, self.control, self.de_p,
-                                  self.s_target, t, self.k)
+                                  self.s_target, t, self.k, self.refusals)
         return s[:, self.k] - self.T, tan, de
 
     def g(self, x) -> float:
@@ -298,7 +330,10 @@ def decide(state, params, control, s_target, de_p, tol: float,
     the unknowns) and whose conjugate stresses must reach ``s_target`` (3,) [Pa] (its free entries
     count); ``tol`` the Newton tolerance [Pa] (a crossing is a continuous root when s' changes by
     less than 100 tol across its last bit). The bracket |e'_k| <= ``scan_strain`` is widened x4 up
-    to ``SCAN_STRAIN_MAX`` while the closest approach lies at its end. See the module docstring."""
+    to ``SCAN_STRAIN_MAX`` while the closest approach lies at its end. See the module docstring.
+    Increments the law refuses (``MaterialError``) are left out of the scans; if the target is
+    reached nowhere else, the law's refusal is raised (a MaterialError: the path cannot go on
+    within the law's domain) rather than an 'unresolved' verdict."""
     _, A, Ainv = control.matrices()
     free = [i for i in range(3) if not control.strain_controlled[i]]
     if not free:
@@ -323,6 +358,13 @@ def decide(state, params, control, s_target, de_p, tol: float,
         if v is not None:
             return v._replace(bracket=S, points=int(ok.sum()))
         if S >= SCAN_STRAIN_MAX:
+            if sc.refusals:
+                # not reached where the law answers, and the law refuses the rest: its refusal
+                # (a MaterialError; the first met, in the narrowest bracket) is the end of the
+                # path, not an unresolved step
+                raise MaterialError(f"{sc.refusals[0]}; the step's static state, if any, lies "
+                                    "among the increments it refuses (none among those it "
+                                    f"accepts, |d e'| <= {S:g})")
             j = int(np.nanargmin(np.abs(g)))
             nan2 = (math.nan, math.nan)
             return Verdict("unresolved", k, sc.T, sc.T + float(g[j]), float(t[j]), 0.0, nan2, nan2,

@@ -96,8 +96,9 @@ class DPParams:
             object.__setattr__(self, f.name, float(v))
         _check(self.G > 0, "G", "G > 0 [Pa]", self.G)
         _check(0.0 <= self.nu < 0.5, "nu", "0 <= nu < 0.5", self.nu)
+        # mu_p's own range first, so that a refused mu_p is named as itself (not as mu0's bound)
+        _check(0.0 < self.mu_p < 1.0, "mu_p", "0 < mu_p < 1 (and mu_p > mu0)", self.mu_p)
         _check(0.0 < self.mu0 < self.mu_p, "mu0", f"0 < mu0 < mu_p = {self.mu_p:g}", self.mu0)
-        _check(self.mu_p < 1.0, "mu_p", "mu0 < mu_p < 1", self.mu_p)
         _check(self.kappa_p > 0, "kappa_p", "kappa_p > 0", self.kappa_p)
         _check(self.mu_c > 0, "mu_c", "mu_c > 0 (beta = mu - mu_c < mu: non-associated)", self.mu_c)
         _check(self.p0 > 0, "p0", "p0 > 0 [Pa]", self.p0)
@@ -180,6 +181,8 @@ class DruckerPrager(Material):
     provides = frozenset()
     description = ("non-associated Drucker-Prager of the plane: isotropic elasticity, friction "
                    "hardening to a peak, stress-dilatancy beta = mu - mu_c")
+    label = "Drucker-Prager"
+    defaults_name = "the benchmark set"
 
     def initial_state(self, params: DPParams, batch_shape: tuple = ()) -> DPState:
         """sigma = p0 I from the stress-free state: eps = p0 / (2 K2) I, no plastic strain."""
@@ -267,6 +270,21 @@ class DruckerPrager(Material):
                       eps_p=tens(eps_p), kappa=kappa.reshape(batch), plastic=load.reshape(batch))
         return new.stress, tangent_from_mandel(D).reshape((2, 2, 2, 2) + batch), new
 
+    def fit_space(self):
+        """What a fit of the law frees, and how (``point.fit.FitSpace``): by default G, mu_p,
+        kappa_p and mu_c (the stiffness, the peak's friction, where it lies, the dilatancy),
+        nu, mu0 and p0 besides on request. The law is homogeneous of degree one in the stress
+        (linear elasticity, a cone, hardening in the plastic strain): q = p0 Q(eps1; G/p0, nu,
+        mu0, mu_p, kappa_p, mu_c), so every choice moves the curve on its own (no structural
+        reduction). G, kappa_p and p0 are fitted as their logarithm within a factor 100 of the
+        start; nu within 0:0.49, mu0 below the start's mu_p, mu_p above the start's mu0 and
+        below 0.99, mu_c within 0.01:0.99."""
+        from .fit import FitSpace
+        return FitSpace(("G", "nu", "mu0", "mu_p", "kappa_p", "mu_c", "p0"),
+                        ("G", "mu_p", "kappa_p", "mu_c"), _FIT_LOG, _fit_bounds, FIT_BOUNDS_TEXT,
+                        lambda name: 1e-3 if name in _FIT_LOG else 1e-4,
+                        peak=("mu_p", "kappa_p"), groups=_fit_groups)
+
     def mechanism(self, state: DPState, params: DPParams) -> Mechanism:
         """The mechanism of the state (``mechanism``): the closed forms of every criterion."""
         return mechanism(params, state)
@@ -297,6 +315,27 @@ class DruckerPrager(Material):
             Dp = m.tangent()
             D = np.where(load[None, None], Dp, D)
         return tangent_from_mandel(D)
+
+
+# the fit (``DruckerPrager.fit_space``): fitted as their logarithm, and the default bounds
+_FIT_LOG = frozenset({"G", "kappa_p", "p0"})
+FIT_BOUNDS_TEXT = ("x/100 to x*100 of the start for G, kappa_p, p0; nu 0:0.49; mu0 0.001 to "
+                   "0.999 mu_p; mu_p mu0 + 0.001 to 0.99; mu_c 0.01:0.99")
+
+
+def _fit_bounds(name: str, base: DPParams) -> tuple:
+    """Default bounds of a free field of the fit (``FIT_BOUNDS_TEXT``), from the start ``base``."""
+    v = float(getattr(base, name))
+    if name in _FIT_LOG:
+        return v / 100.0, v * 100.0
+    return {"nu": (0.0, 0.49), "mu0": (1e-3, 0.999 * base.mu_p), "mu_p": (base.mu0 + 1e-3, 0.99),
+            "mu_c": (0.01, 0.99)}[name]
+
+
+def _fit_groups(params: DPParams) -> dict:
+    """What a drained curve determines: G/p0 [-] and the dimensionless fields, with p0 [Pa]."""
+    return {"G_over_p0": params.G / params.p0, "nu": params.nu, "mu0": params.mu0,
+            "mu_p": params.mu_p, "kappa_p": params.kappa_p, "mu_c": params.mu_c, "p0": params.p0}
 
 
 def invariants(stress):

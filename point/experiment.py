@@ -19,7 +19,8 @@ from .probes import (DEFAULT_PROBE_NORM, ProbeResult, StressProbeResult, directi
 
 __all__ = ["biaxial_test", "state_at_eta", "directional_analysis", "DirectionalAnalysis",
            "biaxial_columns", "probe_columns", "DomainPoint", "DOMAIN_COLUMNS",
-           "domain_point", "bifurcation_domain", "compile_kernels", "DOMAIN_EPS1_MAX"]
+           "domain_point", "bifurcation_domain", "compile_kernels", "DOMAIN_EPS1_MAX",
+           "OPTIONAL_OUTPUTS", "absent_outputs", "present"]
 
 # the axial strain where the searches for point A and for the domain boundaries give up [-]
 DOMAIN_EPS1_MAX = 0.2
@@ -58,9 +59,11 @@ def _check_sigma2(sigma2):
 
 
 def biaxial_test(params, sigma2: float | None = None, d_eps1: float = 1e-5,
-                 eps1_max: float = 0.05, progress: bool = False) -> PathResult:
+                 eps1_max: float = 0.05, progress: bool = False,
+                 keep_states: bool = False) -> PathResult:
     """Drained biaxial test from the isotropic state at ``sigma2`` [Pa] (default params.p0):
-    axial strain steps ``d_eps1`` up to ``eps1_max``, lateral stress held (Figs. 4-5)."""
+    axial strain steps ``d_eps1`` up to ``eps1_max``, lateral stress held (Figs. 4-5);
+    ``keep_states``: every state of the path kept (``run_path``)."""
     sigma2 = params.p0 if sigma2 is None else float(sigma2)
     _check_sigma2(sigma2)
     if not (np.isfinite(eps1_max) and eps1_max > 0):
@@ -74,7 +77,8 @@ def biaxial_test(params, sigma2: float | None = None, d_eps1: float = 1e-5,
     except BaseException as e:
         e.partial = None          # the compression's rows are not the test's (interrupted there)
         raise
-    return run_path(s0, p, drained_biaxial(d_eps1), n, progress=progress, label="drained biaxial")
+    return run_path(s0, p, drained_biaxial(d_eps1), n, progress=progress, label="drained biaxial",
+                    keep_states=keep_states)
 
 
 def state_at_eta(params, eta: float, sigma2: float | None = None, d_eps1: float = 1e-5,
@@ -131,6 +135,31 @@ def biaxial_columns(r: PathResult) -> dict:
             "s1": r.sigma[:, 0], "s2": r.sigma[:, 1], "p": p, "q": q, "eta": eta,
             "s12": r.sigma[:, 2], "n_sliding": r.n_sliding, "n_open": r.n_open,
             "newton_iters": r.newton_iters}
+
+
+# the outputs a law provides only with an optional kind of ``Material.provides``: columns of
+# biaxial.csv and probes.csv, keys of the probes' summary, figures. A law without the kind leaves
+# them out (the CSV columns too: ``present``) and names them in its summaries ("absent").
+OPTIONAL_OUTPUTS = {
+    "lagrangian": ("w2_V", "w2_g", "dPi1", "dPi2", "T2_1", "T2_2", "T3_1", "T3_2",
+                   "det_M_lagrangian", "det_Msym_lagrangian", "lam_min_Msym_lagrangian",
+                   "fig9_w2_split.png"),
+    "micro": ("w2_micro", "w2n", "w2t", "min_w2n", "max_w2t_in_cone", "max_abs_w2_minus_micro",
+              "fig11_w2_normal_tangential.png"),
+    "patterns": ("n_sliding", "n_open"),
+}
+
+
+def absent_outputs(law) -> frozenset:
+    """The names of ``OPTIONAL_OUTPUTS`` that ``law`` does not provide."""
+    return frozenset(n for kind, names in OPTIONAL_OUTPUTS.items() if kind not in law.provides
+                     for n in names)
+
+
+def present(cols: dict, law) -> dict:
+    """The columns of ``cols`` that ``law`` provides (``absent_outputs`` left out)."""
+    gone = absent_outputs(law)
+    return {k: v for k, v in cols.items() if k not in gone}
 
 
 def probe_columns(pr: ProbeResult) -> dict:

@@ -1,6 +1,6 @@
 """Every subcommand's parser, walked: exact options, the same run options everywhere.
 
-The CLIs (hmodel, fem, dem and the cross-check above them) build their parsers with ``common.options.Parser``: no prefix matching (argparse
+The CLIs (point, hmodel, fem, dem and the cross-check above them) build their parsers with ``common.options.Parser``: no prefix matching (argparse
 would take ``--sigma`` for ``--sigma2`` and run), an unknown option refused by the subcommand
 that got it, naming the options it resembles and that subcommand's own ``--help``. Commands that
 show progress take ``--quiet``; the long DEM commands take ``--workers``, ``--resume`` and
@@ -14,10 +14,10 @@ import pytest
 
 from common.options import OptionError
 
-CLIS = ("hmodel", "fem", "dem", "crosscheck")
+CLIS = ("point", "hmodel", "fem", "dem", "crosscheck")
 
 # commands that print no progress (a file is written at once, or only figures are printed)
-NO_PROGRESS = {("hmodel", "params"), ("dem", "params"), ("dem", "bench")}
+NO_PROGRESS = {("point", "params"), ("hmodel", "params"), ("dem", "params"), ("dem", "bench")}
 
 # the DEM commands that spread runs over processes or a cluster, and resume an interrupted run
 # (the cross-check's DEM part among them: python -m crosscheck, one command)
@@ -30,7 +30,9 @@ PENDING = set()
 
 
 def build(module):
-    if module == "hmodel":
+    if module == "point":
+        from point.cli import build_parser
+    elif module == "hmodel":
         from hmodel.cli import build_parser
     elif module == "fem":
         from fem.__main__ import build_parser
@@ -213,11 +215,17 @@ MISTAKES = [
      "python -m dem biaxial --help"),
     (["hmodel", "biaxial", "--eps1-max", "0.01"], "required: --out",
      "python -m hmodel biaxial --help"),
+    (["point", "biaxial", "--model", "drucker", "--out", "OUT"],
+     "--model 'drucker': did you mean drucker-prager?", "python -m point biaxial --help"),
+    (["point", "probes", "--shear", "4e7", "--out", "OUT"],
+     "did you mean --shear-modulus?", "python -m point probes --help"),
 ]
 
 
 def _main(module):
-    if module == "hmodel":
+    if module == "point":
+        from point.cli import main
+    elif module == "hmodel":
         from hmodel.cli import main
     elif module == "fem":
         from fem.__main__ import main
@@ -281,7 +289,7 @@ def test_every_quantity_has_a_unit_and_every_switch_is_positive_or_no():
         if t.kind in ("real", "reals"):
             assert t.unit, f"{t.name} is a quantity with no unit ('-' if dimensionless)"
         if t.kind == "flag" and t.name not in ("--quiet", "--force", "--resume", "--full",
-                                               "--busy-core"):
+                                               "--busy-core", "--check-tangent"):
             assert t.name.startswith("--no-"), f"{t.name}: a negative switch is --no-..."
         assert not t.name.startswith("--skip"), t.name
 
@@ -363,7 +371,7 @@ def test_every_former_name_says_its_new_one():
     assert checked >= 20
 
 
-@pytest.mark.parametrize("module", ("fem", "dem", "hmodel"))
+@pytest.mark.parametrize("module", ("fem", "dem", "hmodel", "point"))
 def test_top_help_describes_the_commands(module, capsys):
     parser = build(module)
     with pytest.raises(SystemExit):

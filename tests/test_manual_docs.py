@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 MANUALS = ("dem.md", "fem.md")
@@ -71,7 +72,7 @@ def _notebook():
 def test_links_of_the_manuals_and_the_notebook_resolve(path):
     bad = [f"{t.relative_to(ROOT) if t.is_relative_to(ROOT) else t}#{a}"
            for t, a in _links(path)
-           if not t.exists() or (a and t.suffix == ".md" and a not in _anchors(t))]
+           if (not t.exists() or (a and t.suffix == ".md" and a not in _anchors(t)))]
     assert not bad, f"{path.relative_to(ROOT)} links to what is not there: {bad}"
 
 

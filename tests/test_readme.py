@@ -1,7 +1,8 @@
 """The README's commands, as written.
 
 Every command of the README (its code blocks and the first column of its table of commands) is
-checked against the parser its CLI builds (`hmodel.cli.build_parser`, `fem.__main__.build_parser`,
+checked against the parser its CLI builds (`hmodel.cli.build_parser`, `point.cli.build_parser`,
+`fem.__main__.build_parser`,
 `dem.__main__.build_parser`, `crosscheck.__main__.build_parser`): the subcommand exists (the
 cross-check is one command, without subcommands), every option is one of the (sub)command's own
 option strings as written (no abbreviation), and the whole line parses. Parsing computes and
@@ -9,9 +10,10 @@ writes nothing; it runs in a temporary folder all the same.
 
 The cheap rows run as written: those whose README time is at most CHEAP_S = 15 s (wall time on
 the idle 2-core machine, warm cache: the issue's "cheap ones"). Today: `hmodel params`, `biaxial`,
-`probes`, `domain`, `burst`, `fit` (on the gallery's DEM curve), `fem biaxial` (the set-up's
-main job) and with `--params`, `dem params` and the 300-disk `dem biaxial`; the rest take from 18
-s to an hour (docs/performance.md). Each runs in a temporary working directory and must exit 0
+`probes`, `domain`, `burst`, `fit` (on the gallery's DEM curve), `point params`, `biaxial`,
+`probes`, `domain` (Drucker-Prager), `fem biaxial` (the set-up's main job) and with `--params`,
+`dem params` and the 300-disk `dem biaxial`; the rest take from 18 s to an hour
+(docs/performance.md). Each runs in a temporary working directory and must exit 0
 and leave every file the row's "writes" column names in backticks (in its `--out` folder; for
 `params`, `--out` is the file).
 """
@@ -34,7 +36,7 @@ MAX_LINES = 150           # the issue's "under ~150 lines"
 CHEAP_S = 15.0            # README wall time, idle machine, warm cache [s]
 
 SET_UP = ("python3 -m venv ", ". .venv/bin/activate", "pip install ", "python -m pytest")
-CLIS = ("hmodel", "fem", "dem", "crosscheck")
+CLIS = ("hmodel", "point", "fem", "dem", "crosscheck")
 
 
 def _text():
@@ -82,7 +84,7 @@ def _segments(command):
 
 
 def _cli(segment):
-    """(module, argv) of a `python -m hmodel|fem|dem|crosscheck ...` command, else None."""
+    """(module, argv) of a `python -m hmodel|point|fem|dem|crosscheck ...` command, else None."""
     words = shlex.split(segment)
     if words[:2] == ["python", "-m"] and len(words) > 2 and words[2] in CLIS:
         return words[2], words[3:]
@@ -96,7 +98,7 @@ def _all_cli_commands():
         for seg in _segments(command):
             if _cli(seg) is None:
                 assert seg.startswith(SET_UP), (
-                    f"README command {seg!r}: neither a `python -m hmodel|fem|dem|crosscheck` command nor a "
+                    f"README command {seg!r}: neither a `python -m hmodel|point|fem|dem|crosscheck` command nor a "
                     "set-up step; teach tests/test_readme.py to check it")
             elif seg not in seen:
                 seen.append(seg)
@@ -106,6 +108,8 @@ def _all_cli_commands():
 def _parser(module):
     if module == "hmodel":
         from hmodel.cli import build_parser
+    elif module == "point":
+        from point.cli import build_parser
     elif module == "fem":
         from fem.__main__ import build_parser
     elif module == "crosscheck":
@@ -191,7 +195,8 @@ def test_cheap_rows_are_the_expected_ones():
     assert [c.split(" --")[0] for c, _ in _cheap_rows()] == [
         "python -m hmodel params", "python -m hmodel biaxial", "python -m hmodel probes",
         "python -m hmodel domain", "python -m hmodel burst", "python -m hmodel fit",
-        "python -m fem biaxial", "python -m fem biaxial", "python -m dem params",
+        "python -m point params", "python -m point biaxial", "python -m point probes",
+        "python -m point domain", "python -m fem biaxial", "python -m fem biaxial", "python -m dem params",
         "python -m dem biaxial"]
 
 

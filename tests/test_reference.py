@@ -6,7 +6,7 @@ constants, complete, and its examples run.
   regenerated, fails here (the message says which page and how to regenerate).
 - Nothing is left without a description or a unit: every option of every command, every column
   and every key of every file the pages list (the script's "gaps").
-- Every command of the three command lines has its page (and the cross-check's two, ``python -m crosscheck`` and ``python -m crosscheck.fit``),
+- Every command of the four command lines (point, hmodel, fem, dem) has its page (and the cross-check's two, ``python -m crosscheck`` and ``python -m crosscheck.fit``),
   the README's commands among them; the README and the parts' docs link the manual.
 - Every page's example runs as written, in one working folder in the order of the pages'
   "needs" (a run of ``dem probes`` reads the states the example of ``dem biaxial`` wrote), from a
@@ -70,15 +70,16 @@ def test_committed_pages_are_the_generated_ones(built):
 
 
 def test_every_command_has_a_page():
-    """Every command of the three parsers (15) and the cross-check's two have a page (the
-    README's table names them all), and every page is a command."""
+    """Every command of the four parsers (21: point's 6, hmodel's 6, fem's 2, dem's 7) and the
+    cross-check's two have a page (the README's table names them all), and every page is a
+    command."""
     readme = (ROOT / "README.md").read_text()
     listed = {" ".join(["python", "-m", *itertools.takewhile(lambda w: not w.startswith("-"),
                                                               m.split()[2:4])])
               for m in re.findall(r"^\| `(python -m [^`]+)`", readme, re.M)}
     have = {c for c, _, _ in CMDS.values()}
     assert listed <= have, f"README commands without a page: {sorted(listed - have)}"
-    assert len({c for c in have if c.count(" ") == 3}) == 15, sorted(have)
+    assert len({c for c in have if c.count(" ") == 3}) == 21, sorted(have)
     assert {"python -m crosscheck", "python -m crosscheck.fit"} <= have
     pages = {p.stem for p in REF.glob("*.md")} - {"README", "vocabulary"}
     assert pages == set(CMDS), (pages ^ set(CMDS))

@@ -36,8 +36,9 @@ def sweep_A(params, state_A):
 
 @pytest.fixture
 def no_computation(monkeypatch):
-    """Every experiment entry point of the CLI fails loudly: validation must come first."""
-    import hmodel.cli as cli
+    """Every experiment entry point of the CLI fails loudly: validation must come first (the
+    commands of python -m hmodel are point.cli's)."""
+    import point.cli as cli
 
     def boom(*a, **k):
         raise AssertionError("computation started before the options were validated")

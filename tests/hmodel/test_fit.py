@@ -14,6 +14,7 @@ import pytest
 
 import hmodel.cli as cli
 import hmodel.fit as hfit
+import point.fit
 from hmodel import HParams
 from hmodel.experiment import biaxial_columns, biaxial_test
 from hmodel.fit import (_covariance, _Problem, curve_check, fit_curve, jacobian, make_curve,
@@ -302,7 +303,7 @@ def no_fit(no_computation, monkeypatch):
     """The CLI's entry points (tests/hmodel/test_bad_input.py) and the fit fail loudly."""
     def boom(*a, **k):
         raise AssertionError("the fit started before the options were validated")
-    monkeypatch.setattr(hfit, "fit_curve", boom)
+    monkeypatch.setattr(point.fit, "fit_curve", boom)       # the one python -m hmodel fit calls
 
 
 def _bad_curves(tmp):

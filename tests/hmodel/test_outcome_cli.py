@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import hmodel.cli as cli
+import point.cli
 from hmodel import HParams
 from hmodel.driver import MixedControlError, drained_biaxial, isotropic_state, run_path
 from common.io import read_csv
@@ -53,7 +54,7 @@ def test_newton_failure_with_a_state_is_exit_1_with_the_rows(tmp_path, capsys, m
         e = MixedControlError("drained biaxial, step 8: a static state exists ... residual 3.1e-03 Pa")
         e.partial = part
         raise e
-    monkeypatch.setattr(cli, "biaxial_test", fails)
+    monkeypatch.setattr(point.cli, "biaxial_test", fails)    # python -m hmodel's commands
     out = tmp_path / "b"
     assert cli.main(["biaxial", "--n-dir", "16", "--out", str(out), "--quiet"]) == 1
     err = capsys.readouterr().err.strip().splitlines()

@@ -8,6 +8,7 @@ import json
 import pytest
 
 import hmodel.cli as cli
+import point.cli
 from hmodel import HParams
 from hmodel.params import UNITS, load_params, save_params
 
@@ -82,8 +83,8 @@ def test_domain_pressures_follow_p0(tmp_path, monkeypatch, capsys):
         seen.append(list(pressures))
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli, "bifurcation_domain", stop)
-    monkeypatch.setattr(cli, "compile_kernels", lambda: 0.0)
+    monkeypatch.setattr(point.cli, "bifurcation_domain", stop)     # python -m hmodel's commands
+    monkeypatch.setattr(point.cli, "compile_kernels", lambda **kw: 0.0)
     f = tmp_path / "p.json"
     save_params(f, HParams(p0=50e3))
     for argv in ([], ["--params", str(f)], ["--params", str(f), "--sigma2", "1e5,3e5"]):

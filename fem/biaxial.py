@@ -28,7 +28,9 @@ from common.paramfile import write_params
 from .output import (CurveWriter, FieldWriter, plot_curve, first_events, cell_tensor, nodal_vector,
                      mode_fields, plot_mode)
 from .problem import Biaxial, Imperfection
-from .reference import material_point_curve
+from point.onsets import NO_CLOSED_FORM
+
+from .reference import FE_CLOSED_FORMS, closed_form_onsets, material_point_curve
 from .solver import LoadStepper, StaticLoss
 
 __all__ = ["BiaxialConfig", "MATERIAL", "build_problem", "run_biaxial", "RunResult", "BURST_POINTER"]
@@ -326,8 +328,12 @@ EVENT_LABELS = {
 }
 
 
-def summarize(curve: dict, mp: dict | None) -> tuple[dict, dict]:
-    """(events: name -> row index, summary dict) for the curve columns."""
+def summarize(curve: dict, mp: dict | None, exact: dict | None = None,
+              d_eps1: float | None = None) -> tuple[dict, dict]:
+    """(events: name -> row index, summary dict) for the curve columns; with ``exact``
+    (``reference.closed_form_onsets``: a law with a single mechanism) each event beside its
+    closed form (``FE_CLOSED_FORMS``): "closed_form" {eps1, eta}, "difference" in eps1 and in
+    load steps of ``d_eps1``, and what the closed form is to this criterion."""
     ev = first_events(curve)
     kq = int(np.argmax(curve["q"]))
     if kq < len(curve["q"]) - 1:
@@ -341,6 +347,17 @@ def summarize(curve: dict, mp: dict | None) -> tuple[dict, dict]:
                                    "q": float(curve["q"][k])}
         else:
             summ["events"][key] = {"label": label, "row": None}
+        if exact is not None and key in FE_CLOSED_FORMS:
+            which, what = FE_CLOSED_FORMS[key]
+            cf = exact.get(which)
+            e = summ["events"][key]
+            e["closed_form"] = dict(cf, h=which, meaning=what) if cf else {"h": which, "meaning": what,
+                                                                          "eps1": None, "eta": None}
+            if cf and e["row"] is not None:
+                d = e["eps1"] - cf["eps1"]
+                e["difference"] = {"eps1": d, "steps": d / d_eps1 if d_eps1 else None}
+    summ["closed_forms"] = ("each event's closed form under the homogeneous specimen's control"
+                            if exact is not None else NO_CLOSED_FORM)
     if mp is not None:
         summ["material_point"] = {"eps1_peak": mp["eps1_peak"], "eta_peak": mp["eta_peak"],
                                   "q_peak": mp["q_peak"], "peak_reached": bool(mp["peak_is_interior"])}
@@ -377,12 +394,19 @@ def format_summary(summ: dict) -> str:
     mp = summ["material_point"]
     mp_label = "material point (point.driver, d_eps1 = 1e-5): peak of q"
     w = max([len(e["label"]) for e in summ["events"].values()] + [len(mp_label)])
-    lines = [f"{'criterion':<{w + 2}s}  eps1 [%]     eta"]
+    exact = any("closed_form" in e for e in summ["events"].values())
+    lines = [f"{'criterion':<{w + 2}s}  eps1 [%]     eta"
+             + ("  closed form: h       eps1 [%]     eta  difference [steps]" if exact else "")]
     for key, e in summ["events"].items():
-        if e["row"] is None:
-            lines.append(f"  {e['label']:<{w}s}  not reached")
-        else:
-            lines.append(f"  {e['label']:<{w}s}  {100 * e['eps1']:8.4f}  {e['eta']:.4f}")
+        row = (f"  {e['label']:<{w}s}  not reached       " if e["row"] is None else
+               f"  {e['label']:<{w}s}  {100 * e['eps1']:8.4f}  {e['eta']:.4f}")
+        cf = e.get("closed_form")
+        if cf is not None:
+            row += (f"  {cf['h']:>14s}  " + (f"{100 * cf['eps1']:8.4f}  {cf['eta']:.4f}"
+                                             if cf["eps1"] is not None else "not reached     "))
+            if e.get("difference"):
+                row += f"  {e['difference']['steps']:+8.2f}"
+        lines.append(row)
     if mp is not None:
         tag = "" if mp["peak_reached"] else " (not reached: end of the computed range)"
         lines.append(f"  {mp_label:<{w}s}  {100 * mp['eps1_peak']:8.4f}  {mp['eta_peak']:.4f}{tag}")
@@ -524,7 +548,8 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
     curve = {k: np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
              for k in rows[0]}
     mp = material_point_curve(prob.params, max(cfg.eps1_max, 1e-4)) if cfg.mp_reference else None
-    events, summ = summarize(curve, mp)
+    exact = closed_form_onsets(prob.params, max(cfg.eps1_max, 1e-4)) if cfg.mp_reference else None
+    events, summ = summarize(curve, mp, exact, cfg.d_eps1)
     timings = dict(stepper.times, total=time.perf_counter() - t_start,
                    indicators_output=t_ind["indicators_output"], global_indicators=t_ind["global"],
                    local_indicators=t_ind["local"],

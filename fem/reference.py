@@ -27,7 +27,8 @@ from point.tensors import to_voigt
 
 from .indicators import mandel
 
-__all__ = ["material_point_criteria", "material_point_curve", "CPeak", "material_point_path"]
+__all__ = ["material_point_criteria", "material_point_curve", "CPeak", "material_point_path",
+           "closed_form_onsets", "FE_CLOSED_FORMS"]
 
 
 def material_point_criteria(params, d_eps1: float, n_steps: int, keep_states: bool = False) -> dict:
@@ -110,3 +111,45 @@ def material_point_path(params, eta_start: float, ratio: float, d_eps1: float,
             "s2": r.sigma[:, 1], "p": p, "q": q, "eta": eta,
             "c": r.sigma[:, 0] + ratio * r.sigma[:, 1], "peak": peak.peak, "below": peak.below(),
             "cpeak": peak}
+
+
+# the closed form each FE criterion is held to, for a law with a single mechanism: (the h at which
+# it fires, what the FE's field and boundary conditions make of it; docs/fem.md derives them)
+FE_CLOSED_FORMS = {
+    "lam_min_ks_f": ("h_sym", "exact: every homogeneous field is admissible under the force "
+                              "control, K_s = sum w B^T D_s B"),
+    "local_lam_Ds": ("h_sym", "exact: the point's own D_s"),
+    "local_w2": ("h_sym", "exact up to the sampling of the directions"),
+    "local_rice": ("h_loc", "exact up to the sampling of the normals"),
+    "fe_peak": ("h0", "exact: the homogeneous specimen's limit point"),
+    "det_k_f": ("h0", "the homogeneous null vector is exact at h = 0; banded fields may cross "
+                      "in the same steps"),
+    "lam_min_ks": ("h_sym", "a lower bound: the displacement control admits no homogeneous "
+                            "field with d eps11 != 0; banded fields make it fire after h_sym, "
+                            "mesh-dependent"),
+    "det_k": ("h_loc", "no exact onset on a finite mesh: banded fields, whose onset in the "
+                       "continuum is Rice's h_loc"),
+}
+
+
+def closed_form_onsets(params, eps1_max: float, d_eps1: float = 1e-5) -> dict:
+    """The closed-form onsets of the material point under the homogeneous specimen's control
+    (eps11 prescribed, sigma22 = p0, sigma12 = 0), for a law with a single mechanism
+    (``Material.mechanism``; None otherwise): {"h0" | "h_sym" | "h_loc": {"eps1", "eta"} of the
+    root of h = h_crit along the path of steps ``d_eps1`` to ``eps1_max`` (``point.onsets``'s
+    interpolation through the path's own states), or None where it is not reached}."""
+    from point.closed_forms import h_rice, h_sym
+    from point.onsets import RICE_STRIDE, first_root, has_mechanism
+    if not has_mechanism(material_of(params)):
+        return None
+    n = max(1, int(round(eps1_max / d_eps1)))
+    ctl = MixedControl(strain_controlled=(True, False, False), d_eps=(d_eps1, 0.0, 0.0))
+    r = run_path(isotropic_state(params), params, ctl, n, keep_states=True)
+    p, q, eta = r.invariants()
+    vals = {"eps1": r.eps[:, 0], "eta": eta}
+    out = {}
+    for key, h_crit, stride in (("h0", lambda m: 0.0, 1), ("h_sym", h_sym, 1),
+                                ("h_loc", lambda m: h_rice(m, n_grid=90)[0], RICE_STRIDE)):
+        root = first_root(r.states, params, h_crit, vals, stride)
+        out[key] = None if root is None else {"eps1": float(root["eps1"]), "eta": float(root["eta"])}
+    return out

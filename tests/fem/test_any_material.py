@@ -182,3 +182,29 @@ def test_burst_of_a_drucker_prager_specimen(monkeypatch):
     rows = {r["switch"]: r for r in res.rows}
     assert rows["below"]["outcome"] == "equilibrium" and rows["past"]["outcome"] == "failure"
     assert abs(rows["past"]["c_peak_error"]) < 1e-9
+
+
+def test_every_criterion_beside_its_closed_form(tmp_path, dp_file, capsys):
+    """A Drucker-Prager specimen through its peak (2 x 4 quads, steps 1e-4): summary.json and the
+    printed table give each criterion's onset beside the closed form of the homogeneous
+    specimen's control and the difference in load steps. The exact ones (lam_min(K_s,f) and the
+    local lam_min(D_s), W2 at h_sym, Rice at h_loc) fire at the first row whose stress ratio is
+    past the closed form's (eta = 2 mu(kappa) along the path: the comparison in eta is exact,
+    in eps1 it carries the two paths' different steps); every other event is named with what
+    its closed form is to it."""
+    out = tmp_path / "cf"
+    assert fcli.main(["biaxial", "--nx", "2", "--ny", "4", "--eps1-max", "0.011", "--d-eps1",
+                      "1e-4", "--n-sphere", "200", "--quiet", "--no-fields", "--params",
+                      str(dp_file), "--out", str(out)]) == 0
+    assert "closed form: h" in capsys.readouterr().out
+    s = json.loads((out / "summary.json").read_text())
+    eta = [float(r["eta"]) for r in _rows(out / "curve.csv")]
+    ev = s["events"]
+    for key, h in (("lam_min_ks_f", "h_sym"), ("local_lam_Ds", "h_sym"), ("local_w2", "h_sym"),
+                   ("local_rice", "h_loc")):
+        e = ev[key]
+        assert e["closed_form"]["h"] == h
+        assert eta[e["row"] - 1] < e["closed_form"]["eta"] <= eta[e["row"]], (key, e)
+        assert abs(e["difference"]["steps"]) < 1.0
+    for key in ("det_k_f", "lam_min_ks", "det_k", "fe_peak"):
+        assert ev[key]["closed_form"]["meaning"]

@@ -423,6 +423,16 @@ def _run_burst(args, stage) -> int:
     print(args.params_note)
     print(f"material: {res.summary['material']['name']}")
     print(format_burst(res.rows))
+    cf = res.summary["closed_forms"]
+    if isinstance(cf, str):
+        print(f"closed forms: {cf}")
+    for e in cf if isinstance(cf, list) else ():
+        c, h = e["c_peak"], e["eta_peak_c"]
+        print(f"R = {e['ratio']:g}, f = {e['start_fraction']:g}: c peak closed form (h = h_R) "
+              f"{c['closed_form'] / 1e3:.4f} kPa at eta {h['closed_form']:.5f}; the FE's "
+              + (f"{c['value'] / 1e3:.4f} kPa at {h['value']:.5f} (difference "
+                 f"{c['difference']:+.3g} Pa, eta {h['difference']:+.2e})"
+                 if c["value"] is not None else "does not peak"))
     t = res.summary["timings"]
     print(f"{len(res.rows)} runs, {t['total']:.1f} s total (drained path {t['drained']:.1f} s, "
           f"proportional paths {t['paths']:.1f} s, material point {t['material_point']:.1f} s, "

@@ -44,7 +44,10 @@ from .dynamics import DENSITY, Tie, TiedStatic, hold, lowest_mode, mass_matrix, 
 from .output import CurveWriter, FieldWriter, cell_tensor, nodal_vector, plot_mode
 from point.burst import CPeak, check_ratio
 
-from .reference import material_point_curve, material_point_path
+from point.contract import material_of
+from point.onsets import NO_CLOSED_FORM, compare, has_mechanism
+
+from .reference import closed_form_c_peak, material_point_curve, material_point_path
 from .solver import LoadStepper, StaticLoss
 
 __all__ = ["BurstConfig", "run_burst", "BurstResult", "BURST_COLUMNS", "PATH_COLUMNS",
@@ -244,6 +247,7 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
         path_w = CurveWriter(out / "paths.csv", PATH_COLUMNS)
         burst_w = CurveWriter(out / "burst.csv", BURST_COLUMNS)
     rows, paths, runs = [], {}, []
+    closed = []              # each path's c peak beside its closed form (a law with a mechanism)
     fields_run = None
     try:
         # 1. the drained FE path to every start state
@@ -282,6 +286,22 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                                            else math.nan))
                 base["c_peak_error"] = base["c_peak"] / base["mp_c_peak"] - 1
                 base["eta_peak_error"] = base["eta_peak_c"] / base["mp_eta_peak_c"] - 1
+                exact = closed_form_c_peak(params, float(f) * eta_peak, float(R), sc.d_eps1,
+                                           cfg.path_d_eps1, len(mp["c"]) + 2)
+                if exact is not None:
+                    nan = math.nan
+                    closed.append(dict(key, criterion="the c peak: h = h_R = (u.E.Q)(P.E.u)/(u.E.u)"
+                                                      " - P:E:Q, u = (1, R, 0)",
+                                       eta_peak_c=compare(base["eta_peak_c"], exact["eta"]),
+                                       c_peak=compare(base["c_peak"], exact["c"]),
+                                       material_point_eta_peak_c=compare(base["mp_eta_peak_c"],
+                                                                         exact["eta"]),
+                                       material_point_c_peak=compare(base["mp_c_peak"], exact["c"])))
+                    say(f"  closed form (h = h_R): c peak {exact['c'] / 1e3:.4f} kPa at eta "
+                        f"{exact['eta']:.5f}; the FE's {fmt(base['c_peak'] / 1e3, '.4f')} kPa at "
+                        f"{fmt(base.get('eta_peak_c', nan), '.5f')}, the material point's "
+                        f"{fmt(base['mp_c_peak'] / 1e3, '.4f')} kPa at "
+                        f"{fmt(base['mp_eta_peak_c'], '.5f')}")
                 if peak is not None:
                     b = base
                     say(f"path R = {R:g}, f = {f:g}: c peak {b['c_peak'] / 1e3:.3f} kPa at eta "
@@ -347,6 +367,7 @@ def run_burst(cfg: BurstConfig, out_dir=None, progress=None) -> BurstResult:
                "mesh": {"elements": prob.nel, "points": prob.npts, "dofs": prob.ndofs},
                "fields": ({"run": fields_run, "frames_every": _frame_every(cfg)}
                           if fields_run else None),
+               "closed_forms": closed if has_mechanism(material_of(params)) else NO_CLOSED_FORM,
                "runs": rows, "timings": timings}
     if out is not None:
         t0 = time.perf_counter()

@@ -28,7 +28,7 @@ from point.tensors import to_voigt
 from .indicators import mandel
 
 __all__ = ["material_point_criteria", "material_point_curve", "CPeak", "material_point_path",
-           "closed_form_onsets", "FE_CLOSED_FORMS"]
+           "closed_form_onsets", "FE_CLOSED_FORMS", "closed_form_c_peak"]
 
 
 def material_point_criteria(params, d_eps1: float, n_steps: int, keep_states: bool = False) -> dict:
@@ -153,3 +153,26 @@ def closed_form_onsets(params, eps1_max: float, d_eps1: float = 1e-5) -> dict:
         root = first_root(r.states, params, h_crit, vals, stride)
         out[key] = None if root is None else {"eps1": float(root["eps1"]), "eta": float(root["eta"])}
     return out
+
+
+def closed_form_c_peak(params, eta_start: float, ratio: float, d_eps1: float, path_d_eps1: float,
+                       rows: int):
+    """The c peak of the material point's burst path (``material_point_path``'s: the drained path
+    to ``eta_start``, then the proportional strain path of ``ratio``) in closed form, for a law
+    with a single mechanism (None otherwise, or where it is not reached within ``rows`` steps of
+    the proportional path): {"eta", "c", "eps1"} where h = h_R = (u.E.Q)(P.E.u)/(u.E.u) - P:E:Q,
+    u = (1, R, 0), interpolated through the path's own states (``point.onsets.first_root``);
+    eps1 counted from the path's start."""
+    from point.closed_forms import h_path
+    from point.driver import proportional_strain
+    from point.onsets import first_root, has_mechanism
+    if not has_mechanism(material_of(params)):
+        return None
+    _, state = state_at_eta(params, eta_start, d_eps1=d_eps1)
+    r = run_path(state, params, proportional_strain(path_d_eps1, ratio), max(1, int(rows)),
+                 keep_states=True)
+    p, q, eta = stress_invariants(r.sigma)
+    u = (1.0, float(ratio), 0.0)
+    root = first_root(r.states, params, lambda m: h_path(m, u),
+                      {"eta": eta, "c": r.sigma[:, 0] + ratio * r.sigma[:, 1], "eps1": r.eps[:, 0]})
+    return None if root is None else {k: float(root[k]) for k in ("eta", "c", "eps1")}

@@ -182,6 +182,12 @@ def test_burst_of_a_drucker_prager_specimen(monkeypatch):
     rows = {r["switch"]: r for r in res.rows}
     assert rows["below"]["outcome"] == "equilibrium" and rows["past"]["outcome"] == "failure"
     assert abs(rows["past"]["c_peak_error"]) < 1e-9
+    # the c peak beside its closed form h = h_R: the path's sampled peak lies below the exact
+    # one by less than c's rise over one path step there (c is concave at its peak)
+    (cf,) = res.summary["closed_forms"]
+    assert cf["ratio"] == rows["past"]["ratio"]
+    rise = rows["past"]["dc_rule"]          # c_peak - c_(peak - 1) of the FE path
+    assert -abs(rise) <= cf["c_peak"]["difference"] <= 1e-6 * cf["c_peak"]["closed_form"]
 
 
 def test_every_criterion_beside_its_closed_form(tmp_path, dp_file, capsys):

@@ -196,7 +196,8 @@ def test_cheap_rows_are_the_expected_ones():
         "python -m hmodel params", "python -m hmodel biaxial", "python -m hmodel probes",
         "python -m hmodel domain", "python -m hmodel burst", "python -m hmodel fit",
         "python -m point params", "python -m point biaxial", "python -m point probes",
-        "python -m point domain", "python -m fem biaxial", "python -m fem biaxial", "python -m dem params",
+        "python -m point domain", "python -m fem biaxial", "python -m fem biaxial",
+        "python -m fem biaxial", "python -m dem params",
         "python -m dem biaxial"]
 
 

@@ -28,7 +28,7 @@ from common.paramfile import write_params
 from .output import (CurveWriter, FieldWriter, plot_curve, first_events, cell_tensor, nodal_vector,
                      mode_fields, plot_mode)
 from .problem import Biaxial, Imperfection
-from point.onsets import NO_CLOSED_FORM
+from point.onsets import NO_CLOSED_FORM, has_mechanism
 
 from .reference import FE_CLOSED_FORMS, closed_form_onsets, material_point_curve
 from .solver import LoadStepper, StaticLoss
@@ -547,8 +547,10 @@ def run_biaxial(cfg: BiaxialConfig, out_dir=None, progress=None, params_note=Non
             fields.close()
     curve = {k: np.array([np.nan if r.get(k) is None else r[k] for r in rows], dtype=float)
              for k in rows[0]}
-    mp = material_point_curve(prob.params, max(cfg.eps1_max, 1e-4)) if cfg.mp_reference else None
-    exact = closed_form_onsets(prob.params, max(cfg.eps1_max, 1e-4)) if cfg.mp_reference else None
+    mech = has_mechanism(material_of(prob.params))
+    mp = (material_point_curve(prob.params, max(cfg.eps1_max, 1e-4), keep_states=mech)
+          if cfg.mp_reference else None)
+    exact = closed_form_onsets(prob.params, mp["path"]) if mp is not None and mech else None
     events, summ = summarize(curve, mp, exact, cfg.d_eps1)
     timings = dict(stepper.times, total=time.perf_counter() - t_start,
                    indicators_output=t_ind["indicators_output"], global_indicators=t_ind["global"],

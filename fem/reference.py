@@ -79,17 +79,22 @@ def material_point_criteria(params, d_eps1: float, n_steps: int, keep_states: bo
     return out
 
 
-def material_point_curve(params, eps1_max: float, d_eps1: float = 1e-5) -> dict:
+def material_point_curve(params, eps1_max: float, d_eps1: float = 1e-5,
+                         keep_states: bool = False) -> dict:
     """The drained biaxial curve of point.driver, any law (for the figure and the peak): eps1, q, p, eta,
     the peak (eps1_peak, q_peak, eta_peak), and how the path ended (outcome, end: the line of
-    ``PathResult.end``, e.g. 'discontinuous at eps1 = ...' where no static state exists beyond)."""
+    ``PathResult.end``, e.g. 'discontinuous at eps1 = ...' where no static state exists beyond).
+    ``keep_states``: also "path", the PathResult with its states (``closed_form_onsets``)."""
     n = max(1, int(round(eps1_max / d_eps1)))
-    r = run_path(isotropic_state(params), params, drained_biaxial(d_eps1), n)
+    r = run_path(isotropic_state(params), params, drained_biaxial(d_eps1), n, keep_states=keep_states)
     p, q, eta = r.invariants()
     k = int(np.argmax(q))
-    return {"eps1": r.eps[:, 0], "q": q, "p": p, "eta": eta, "eps1_peak": float(r.eps[k, 0]),
-            "q_peak": float(q[k]), "eta_peak": float(eta[k]), "peak_is_interior": k < len(q) - 1,
-            "outcome": r.end.outcome, "end": r.end.line()}
+    out = {"eps1": r.eps[:, 0], "q": q, "p": p, "eta": eta, "eps1_peak": float(r.eps[k, 0]),
+           "q_peak": float(q[k]), "eta_peak": float(eta[k]), "peak_is_interior": k < len(q) - 1,
+           "outcome": r.end.outcome, "end": r.end.line()}
+    if keep_states:
+        out["path"] = r
+    return out
 
 
 def material_point_path(params, eta_start: float, ratio: float, d_eps1: float,
@@ -132,25 +137,25 @@ FE_CLOSED_FORMS = {
 }
 
 
-def closed_form_onsets(params, eps1_max: float, d_eps1: float = 1e-5) -> dict:
-    """The closed-form onsets of the material point under the homogeneous specimen's control
-    (eps11 prescribed, sigma22 = p0, sigma12 = 0), for a law with a single mechanism
-    (``Material.mechanism``; None otherwise): {"h0" | "h_sym" | "h_loc": {"eps1", "eta"} of the
-    root of h = h_crit along the path of steps ``d_eps1`` to ``eps1_max`` (``point.onsets``'s
-    interpolation through the path's own states), or None where it is not reached}."""
+def closed_form_onsets(params, path) -> dict:
+    """The closed-form onsets along the material point's drained path ``path`` (a PathResult
+    with its states: ``material_point_curve(..., keep_states=True)``), for a law with a single
+    mechanism (``Material.mechanism``; None otherwise): {"h0" | "h_sym" | "h_loc": {"eps1",
+    "eta"} of the root of h = h_crit (``point.onsets``'s interpolation through the path's own
+    states), or None where it is not reached}. The homogeneous specimen's control (eps11
+    prescribed, sigma22 = p0, sigma12 = 0) and the drained path's (eps12 = 0 instead of
+    sigma12 = 0) are the same path for a law whose states stay coaxial (isotropic elasticity,
+    a yield function of the invariants: no shear arises)."""
     from point.closed_forms import h_rice, h_sym
     from point.onsets import RICE_STRIDE, first_root, has_mechanism
-    if not has_mechanism(material_of(params)):
+    if path is None or not has_mechanism(material_of(params)):
         return None
-    n = max(1, int(round(eps1_max / d_eps1)))
-    ctl = MixedControl(strain_controlled=(True, False, False), d_eps=(d_eps1, 0.0, 0.0))
-    r = run_path(isotropic_state(params), params, ctl, n, keep_states=True)
-    p, q, eta = r.invariants()
-    vals = {"eps1": r.eps[:, 0], "eta": eta}
+    p, q, eta = path.invariants()
+    vals = {"eps1": path.eps[:, 0], "eta": eta}
     out = {}
     for key, h_crit, stride in (("h0", lambda m: 0.0, 1), ("h_sym", h_sym, 1),
                                 ("h_loc", lambda m: h_rice(m, n_grid=90)[0], RICE_STRIDE)):
-        root = first_root(r.states, params, h_crit, vals, stride)
+        root = first_root(path.states, params, h_crit, vals, stride)
         out[key] = None if root is None else {"eps1": float(root["eps1"]), "eta": float(root["eta"])}
     return out
 

@@ -31,6 +31,7 @@ __all__ = ["HModel", "HMODEL"]
 OUTPUTS = ("d1", "d2", "alpha", "N1", "T1", "N2", "l1", "l2", "cos_alpha", "sin_alpha",
            "sliding", "is_open", "stress", "tangent", "tangent_lagrangian", "dPi", "T3",
            "w2_hex", "w2n", "w2t")
+assert OUTPUTS[:10] == HEX_FIELDS
 
 
 class HModel(Material):
@@ -108,13 +109,14 @@ class HModel(Material):
         out = _kernels.allocate_outputs(npts, ndir)
         kern = _kernels.update_parallel if npts >= PARALLEL_MIN_POINTS else _kernels.update_serial
         kern(*args[:-1], de, *_material_args(params), not elastic, False, *out)
-        sig, tan = out[12], out[13]
+        o = dict(zip(OUTPUTS, out))
+        sig, tan = o["stress"], o["tangent"]
         if not (np.isfinite(sig).all() and np.isfinite(tan).all()):
             _refuse_non_finite(state)
         batch = state.batch_shape
-        ns = HState(*out[:10], eps=state.eps + from_voigt(de, batch), stress=from_voigt(sig, batch),
-                    V0=np.array(state.V0, dtype=float), sliding=out[10], is_open=out[11],
-                    params_key=state.params_key)
+        ns = HState(*(o[f] for f in HEX_FIELDS), eps=state.eps + from_voigt(de, batch),
+                    stress=from_voigt(sig, batch), V0=np.array(state.V0, dtype=float),
+                    sliding=o["sliding"], is_open=o["is_open"], params_key=state.params_key)
         return ns, sig, tan
 
     def point_fractions(self, state) -> tuple:
@@ -134,8 +136,8 @@ class HModel(Material):
         ``state`` None: the record of no change."""
         if state is None:
             return {"theta": [], "N1": [], "N2": [], "alpha": [], "opens": [], "via": [], "count": 0}
-        out = update_copies(state, np.vstack([de_a, de_b]), params, extras=False)
-        sl, op, N1, N2, al = out[10], out[11], out[3], out[5], out[2]
+        o = dict(zip(OUTPUTS, update_copies(state, np.vstack([de_a, de_b]), params, extras=False)))
+        sl, op, N1, N2, al = o["sliding"], o["is_open"], o["N1"], o["N2"], o["alpha"]
         diff = np.flatnonzero((sl[0] != sl[1]) | (op[0] != op[1]))
         closed = [0 if not op[0, i] else 1 for i in diff]
         opens = [bool(op[0, i] != op[1, i]) for i in diff]

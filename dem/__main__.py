@@ -542,8 +542,10 @@ def check_regime_of(a):
     if a.cmd in ("biaxial", "bench"):
         P = _params(a)
         sigma = a.sigma2 if a.cmd == "biaxial" else BENCH_STRESS
-        where = (f"--kn-over-d {a.kn_over_d:g}" if a.kn_over_d is not None else
-                 f"--params {a.params}" if a.params else "the paper's set")
+        given = ([f"--params {a.params}"] if a.params else []) + (
+            [f"--kn-over-d {a.kn_over_d:g}"] if a.kn_over_d is not None else []) + (
+            [f"--sigma2 {sigma:g}"] if a.cmd == "biaxial" and sigma != BENCH_STRESS else [])
+        where = ", ".join(given) or "the paper's set"
         return R.check_regime(P, sigma, soft, where, "--sigma2" if a.cmd == "biaxial" else "")
     if a.cmd == "probes":
         from . import io

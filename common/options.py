@@ -334,6 +334,9 @@ VOCABULARY = {t.name: t for t in (
        "mu_r R* fn (0: free rotation, the paper's)", "-", fields=("DemParams.rolling_friction",)),
     _T("--rolling-stiffness", "rolling stiffness k_r over kt R*^2 (used with --rolling-friction "
        "> 0)", "-", fields=("DemParams.rolling_stiffness",)),
+    _T("--allow-soft", "run a DEM set outside the granular regime anyway (stiffness number "
+       "kn/(sigma2 t) below 100: overlaps beyond 0.01 of the diameter; dem.regime), where it is "
+       "refused otherwise; a summary records it", None, "flag"),
     # -- the loading ---------------------------------------------------------------------------
     _T("--sigma2", "confining (lateral) stress sigma2, the isotropic start's p0", "Pa", "real",
        0, 1e9, hi_open=False,

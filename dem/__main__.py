@@ -87,7 +87,8 @@ def cmd_biaxial(a):
                       eps_max=a.eps1_max, compaction_friction_deg=a.compaction_phi_g,
                       resume=a.resume, vtk=not a.no_vtk,
                       save_fractions=tuple(a.save_fractions), save_etas=tuple(a.save_etas),
-                      params_note=f"python -m dem biaxial; {a.params_note}", verbose=not a.quiet)
+                      params_note=f"python -m dem biaxial; {a.params_note}", verbose=not a.quiet,
+                      allow_soft=a.allow_soft)
     print(a.params_note)
     print(f"biaxial: {len(res.rows)} rows -> {os.path.join(a.out, 'biaxial.csv')}; "
           f"stateA={res.state_a_path} (eta {a.eta_a:g} "
@@ -143,7 +144,7 @@ def cmd_probes(a):
     summary = {"state": os.path.abspath(a.state), "parameters": note, "reference": ref,
                "n_disks": state.params.n,
                "sigma2": s2, "directions": len(rows), "outcomes": dict(cnt),
-               "options": opts._asdict(), "wall_time": time.time() - t0}
+               "options": opts._asdict(), "regime": a.regime, "wall_time": time.time() - t0}
     atomic_write_bytes(os.path.join(a.out, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     print(note)
@@ -168,7 +169,7 @@ def cmd_domain(a):
     from .domain import eta_lim_text
     rows, b, _ = run_domain(a.biaxial, a.out, states=states, alphas=alphas, opts=opts,
                          workers=a.workers, scheduler=a.scheduler, resume=a.resume,
-                         hmodel=not a.no_hmodel, verbose=not a.quiet)
+                         hmodel=not a.no_hmodel, verbose=not a.quiet, allow_soft=a.allow_soft)
     print(f"domain: {len(rows)} states -> {os.path.join(a.out, 'domain.csv')}; lower boundary: "
           f"{b['lower_state']} (eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the "
           f"peak {b['eta_peak']:.4f}, {b['lower_why']}); {eta_lim_text(b)}; "
@@ -229,7 +230,7 @@ def cmd_burst(a):
     rows, s = run_burst(a.biaxial, a.out, a.ratios, a.start_fractions, a.burst_options,
                         workers=a.workers, threads=a.threads, params_file=a.params,
                         stage=a.stage, resume=a.resume, scheduler=a.scheduler,
-                        verbose=not a.quiet)
+                        verbose=not a.quiet, allow_soft=a.allow_soft)
     a.stage.wrote("params.json", "burst.csv", "history.csv", "paths.csv", "rest.csv",
                   "stairs.csv", "probes.csv", "summary.json", "fig_burst_c.png",
                   "fig_burst_ke.png", "fig_burst_strain.png", "fig_burst_ledger.png",
@@ -260,7 +261,7 @@ def cmd_burst(a):
 def cmd_bench(a):
     from .bench import bench
     res = bench(params=_params(a), steps=a.steps, cache_dir=a.cache, busy=a.busy_core,
-                rounds=a.rounds)
+                rounds=a.rounds, allow_soft=a.allow_soft)
     for k, v in res.items():
         if k != "ledger_cost":
             print(f"{k}: {fmt(v, '.4g') if isinstance(v, float) else v}")
@@ -290,7 +291,7 @@ def cmd_calibrate(a):
     s = run_calibration(a.out, _params(a), options=options, workers=a.workers,
                         scheduler=a.scheduler, resume=a.resume,
                         stage=getattr(a, "stage", None), params_note=a.params_note,
-                        verbose=not a.quiet)
+                        verbose=not a.quiet, allow_soft=a.allow_soft)
     print(a.params_note)
     print("\n".join(s["verdict"]["text"]))
     print(f"calibrate: {s['evaluations']} parameter sets, {s['runs']} runs ({s['run_now']} run "
@@ -365,6 +366,7 @@ def build_parser() -> opt.Parser:
     add(g, "--save-etas", [], default_text="none")
     add(g, "--resume", note="from --out/checkpoint.npz")
     add(g, "--no-vtk")
+    add(g, "--allow-soft")
     add(g, "--threads", default_text="auto (common.threads)")
     opt.add_quiet(g)
     b.set_defaults(func=cmd_biaxial)
@@ -375,6 +377,7 @@ def build_parser() -> opt.Parser:
     opt.add_out(p)
     _probe_parser_options(p)
     add(p, "--no-relax")
+    add(p, "--allow-soft", note="the state's parameters at its confining stress")
     add(p, "--damping", record="DemParams", note="overrides the state's (a sensitivity check)",
         default_text="the state's")
     add(p, "--params", metavar="FILE", note="refused unless it is the state's own (a state "
@@ -393,6 +396,7 @@ def build_parser() -> opt.Parser:
     add(d, "--params", metavar="FILE", note="refused unless it is the states' own",
         default_text="the states'")
     add(d, "--no-hmodel")
+    add(d, "--allow-soft", note="the states' parameters at the test's sigma2")
     add(d, "--resume", note="the references and probe runs in --out")
     opt.add_quiet(d)
     d.set_defaults(func=cmd_domain)
@@ -436,6 +440,7 @@ def build_parser() -> opt.Parser:
     add(g, "--threads", default_text="auto (common.threads)", note="of a run alone in the process")
     add(g, "--params", metavar="FILE", note="refused unless it is the states' own",
         default_text="the states'")
+    add(g, "--allow-soft", note="the states' parameters at the test's sigma2")
     opt.add_quiet(g)
     u.set_defaults(func=cmd_burst)
 
@@ -451,6 +456,7 @@ def build_parser() -> opt.Parser:
     add(c, "--cache", os.path.join(os.path.expanduser("~"), ".cache", "dem"), metavar="DIR")
     add(c, "--rounds", 1)
     add(c, "--busy-core")
+    add(c, "--allow-soft", note="the sample's parameters at 200 kPa")
     c.set_defaults(func=cmd_bench)
 
     from .calibrate import CalibrationOptions, TARGETS, bounds_type, seeds_type, vary_type
@@ -497,6 +503,7 @@ def build_parser() -> opt.Parser:
     add(g, "--workers", default_text="the cores", note="each evaluation runs on one thread")
     add(g, "--scheduler", default_text="none (local processes)")
     add(g, "--resume", note="every evaluation in --out/evaluations.jsonl is taken")
+    add(g, "--allow-soft", note="the softest set of --bounds at --sigma2")
     opt.add_quiet(g)
     k.set_defaults(func=cmd_calibrate)
     return ap
@@ -518,6 +525,43 @@ def check_state(path, option="--state"):
         head = f"state file {path}"
         why = why[len(head):].lstrip(":, ") if why.startswith(head) else why
         raise opt.OptionError(f"{option} {path}: {why}; allowed {STATE_FILE}") from None
+
+
+BENCH_STRESS = 200e3      # the confining stress of dem bench's sample (dem.bench.confined_sample)
+
+
+def check_regime_of(a):
+    """The granular regime of a command's parameters at its confining stress
+    (``dem.regime.check_regime``), before anything runs: a SoftContactError (a ValueError: one
+    line, exit 2) outside it unless --allow-soft; returns what the summary records (None for a
+    command that runs nothing). biaxial, bench: the parameters at --sigma2 (bench: 200 kPa);
+    probes: the state's at its confining stress; domain, burst: the states' at the biaxial test's
+    sigma2; calibrate: the softest set of its search space at --sigma2."""
+    from . import regime as R
+    soft = bool(getattr(a, "allow_soft", False))
+    if a.cmd in ("biaxial", "bench"):
+        P = _params(a)
+        sigma = a.sigma2 if a.cmd == "biaxial" else BENCH_STRESS
+        given = ([f"--params {a.params}"] if a.params else []) + (
+            [f"--kn-over-d {a.kn_over_d:g}"] if a.kn_over_d is not None else []) + (
+            [f"--sigma2 {sigma:g}"] if a.cmd == "biaxial" and sigma != BENCH_STRESS else [])
+        where = ", ".join(given) or "the paper's set"
+        return R.check_regime(P, sigma, soft, where, "--sigma2" if a.cmd == "biaxial" else "")
+    if a.cmd == "probes":
+        from . import io
+        st, _ = io.load_state(a.state)
+        from .simulation import confining_stress
+        return R.check_regime(st.params, confining_stress(st), soft,
+                              f"--state {a.state} (its parameters)", "")
+    if a.cmd in ("domain", "burst"):
+        return R.check_biaxial_regime(a.biaxial, soft)
+    if a.cmd == "calibrate":
+        from .calibrate import make_space
+        o = a.calibration
+        space = make_space(o.vary, _params(a), o.bounds)
+        soft_set, where = R.softest(space, _params(a))
+        return R.check_regime(soft_set, o.confining, soft, where, "--sigma2")
+    return None
 
 
 def check_run_options(a):
@@ -607,12 +651,21 @@ def main(argv=None):
         elif getattr(a, "biaxial", None):
             from .domain import load_states
             load_states(a.biaxial, [s for s in (getattr(a, "states", None) or "").split(",") if s])
+        a.regime = check_regime_of(a)   # a set outside the granular regime, before any run
         stage.at(f"dem {a.cmd}" + (" (run it again with --resume to continue)"
                                    if hasattr(a, "resume") else ""))
         if a.cmd != "params":
             compile_kernels_once()    # before the command's own timers start
         a.stage = stage           # a command may say where it is (dem calibrate)
-        a.func(a)
+        from .regime import UnsoundState
+        try:
+            a.func(a)
+        except UnsoundState as e:     # a run's failure, not bad input: one line, exit 1
+            from .io import save_unsound
+            kept = save_unsound(e, getattr(a, "out", None) if a.cmd != "params" else None)
+            print(f"stopped: {e}" + (f"; the state is kept in {kept}" if kept else ""),
+                  file=sys.stderr)
+            return 1
         return 0
 
     code = opt.run_cli(build_parser(), argv, run, errors=(ValueError, RuntimeError))

@@ -24,9 +24,9 @@ from .params import DemParams
 from .sample import compact
 
 
-def confined_sample(n=12000, seed=1, cache_dir=None, params=None):
+def confined_sample(n=12000, seed=1, cache_dir=None, params=None, allow_soft=False):
     """Compacted sample of ``params`` (default: the paper's set with n disks and this seed),
-    cached as npz in cache_dir if given."""
+    cached as npz in cache_dir if given; ``allow_soft``: ``dem.sample.compact``'s."""
     params = params or DemParams(n=n, seed=seed)
     tag = f"bench_n{params.n}_s{params.seed}"
     if params != DemParams(n=params.n, seed=params.seed):
@@ -40,7 +40,7 @@ def confined_sample(n=12000, seed=1, cache_dir=None, params=None):
             return io.load_state(path)[0]
         except ValueError:
             pass
-    sim, _ = compact(params)
+    sim, _ = compact(params, allow_soft=allow_soft)
     st = sim.state()
     if path:
         io.save_state(path, st)
@@ -97,11 +97,13 @@ def ledger_cost(state, steps, chunk=100):
     return float(np.median(pairs))
 
 
-def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3, params=None):
+def bench(n=12000, steps=2000, seed=1, cache_dir=None, busy=False, rounds=3, params=None,
+          allow_soft=False):
     """Medians over ``rounds`` interleaved rounds of particle-steps/s on one thread, on the
     default (auto) and on all threads, and their ratios to one thread; ``busy``: with a
-    busy-loop process beside the run; ``params``: DemParams in place of (n, seed)."""
-    st = confined_sample(n, seed, cache_dir, params)
+    busy-loop process beside the run; ``params``: DemParams in place of (n, seed);
+    ``allow_soft``: a set outside the granular regime compacted anyway (``dem.regime``)."""
+    st = confined_sample(n, seed, cache_dir, params, allow_soft)
     n = st.params.n
     nt = available_threads()
     variants = {"1_thread": 1, "auto": None, f"{nt}_threads": nt}

@@ -172,7 +172,7 @@ def load_states(biaxial_dir, names=None, option="--states"):
 
 def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions(),
                workers=None, scheduler=None, resume=False, verbose=True, hmodel=True,
-               choose=None):
+               choose=None, allow_soft=False):
     """Relax every saved state, run its directional analysis (one pool for all), write
     ``out_dir/params.json`` (the states' parameters), ``domain.csv``, ``domain_probes.csv``,
     ``boundaries.json``, one sub-folder per state
@@ -182,10 +182,14 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
     ``choose(references) -> names``: called once the references are relaxed with a list of
     (name, State R, outcome, meta), it names the states whose directional analysis is run
     (default: every state whose reference held).  Returns (domain rows, boundaries, rows of
-    probes by state name)."""
+    probes by state name). States of parameters outside the granular regime at the test's sigma2
+    (``dem.regime.check_biaxial_regime``) are refused unless ``allow_soft``; boundaries.json
+    records the regime (``regime``)."""
+    from .regime import check_biaxial_regime
     opts.validate()
     alphas = directions() if alphas is None else [float(a) for a in alphas]
     todo, eta_peak = load_states(biaxial_dir, states)
+    regime = check_biaxial_regime(biaxial_dir, allow_soft)
     t0 = time.time()
     os.makedirs(out_dir, exist_ok=True)
     if todo:      # the states of one biaxial test carry its parameters
@@ -231,7 +235,7 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
     b = boundaries(drows, eta_peak)
     b.update(n_disks=todo[0][1].params.n if todo else None, wall_time=time.time() - t0,
              directions=alphas, options=opts._asdict(), biaxial=os.path.abspath(biaxial_dir),
-             fingerprints={name: state_fingerprint(st) for name, st, _ in todo})
+             fingerprints={name: state_fingerprint(st) for name, st, _ in todo}, regime=regime)
     hm = (hmodel if isinstance(hmodel, dict) else
           hmodel_boundary(todo[0][1].control.s_to[0] if todo else 200e3) if hmodel else None)
     if hm:

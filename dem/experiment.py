@@ -19,6 +19,7 @@ from common.io import atomic_write_bytes
 
 from . import io
 from .params import DemParams, record_params
+from .regime import check_regime
 from .sample import compact
 from .ledger import Ledger
 from .simulation import Simulation
@@ -67,7 +68,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
                 eps_max=0.10, post_peak_strain=0.02, record_strain=1e-4,
                 compaction_friction_deg=0.0, checkpoint_every=50, resume=False,
                 verbose=True, figures=True, vtk=True, save_fractions=SAVE_FRACTIONS,
-                save_etas=(), params_note=None) -> BiaxialResult:
+                save_etas=(), params_note=None, allow_soft=False) -> BiaxialResult:
     """Compact, then run the drained biaxial test past the peak.
 
     Writes out_dir/params.json first (``params``: ``--params out_dir/params.json`` repeats the
@@ -86,6 +87,10 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     largest eta so far above ``min(save_fractions) - 0.02`` of it is written to
     out_dir/candidates/ (and is part of the checkpoint), so a resumed run picks the same
     states as an uninterrupted one; the folder is removed at the end.
+
+    A set outside the granular regime at ``confining`` (``dem.regime.check_regime``) is refused
+    before anything is written, unless ``allow_soft``; summary.json records the regime
+    (``regime``). A run that reaches an unsound state (``dem.regime.UnsoundState``) stops there.
     """
     for name, val, ok, rng in (("rate", rate, rate > 0, "rate > 0 [1/s]"),
                                ("confining", confining, confining > 0, "confining > 0 [Pa]"),
@@ -99,6 +104,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
                                 "eta > 0")):
         if not ok:
             raise ValueError(f"{name}={val!r}; allowed range: {rng}")
+    regime = check_regime(params, confining, allow_soft)
     t_start = time.time()
     os.makedirs(out_dir, exist_ok=True)
     record_params(out_dir, params, params_note or "dem.experiment.run_biaxial")
@@ -120,7 +126,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     else:
         t0 = time.time()
         sim, rep = compact(params, stress=confining, friction_deg=compaction_friction_deg,
-                           verbose=verbose)
+                           verbose=verbose, allow_soft=allow_soft)
         info["compaction"] = {"porosity": float(rep.porosity), "stress": list(rep.stress),
                               "unbalanced": float(rep.unbalanced), "steps": int(rep.steps),
                               "converged": bool(rep.converged), "wall_time": time.time() - t0}
@@ -209,7 +215,8 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     wall = time.time() - t_start + info.get("wall_time_before", 0.0)
     summary = {k: v for k, v in info.items() if k not in ("rows", "candidates")}
     summary.update(n=sim.n, rate=rate, confining=confining, eta_a=eta_a, dt=sim.dt,
-                   wall_time=wall, params=params.to_dict(), parameters=params_note)
+                   wall_time=wall, params=params.to_dict(), parameters=params_note,
+                   regime=regime)
     atomic_write_bytes(os.path.join(out_dir, "summary.json"),
                           json.dumps(summary, indent=1, default=float).encode())
     if figures:

@@ -73,6 +73,19 @@ def save_state(path, state: State, meta: dict | None = None, arrays: dict | None
     atomic_write_bytes(path, buf.getvalue())
 
 
+def save_unsound(exc, out_dir) -> str | None:
+    """Keep the state of a run stopped on an unsound state (``dem.regime.UnsoundState``) as
+    ``out_dir``/unsound_state.npz, its outcome, step and line in the meta; returns the path (None
+    without a state or a folder)."""
+    from .regime import KEPT
+    if exc.state is None or not out_dir:
+        return None
+    os.makedirs(out_dir, exist_ok=True)
+    path = os.path.join(out_dir, KEPT)
+    save_state(path, exc.state, meta={"outcome": exc.outcome, "step": exc.step, "why": str(exc)})
+    return path
+
+
 _KEYS = ["format", "format_version", "params", "x", "v", "w", "theta", "r", "walls",
          "walls_ref", "prev", "x_ref", "pi", "pj", "ft", "step", "time", "mu", "cap_on",
          "ctrl_mode", "ctrl_s_from", "ctrl_s_to", "ctrl_ramp", "ctrl_rate", "ctrl_len0",

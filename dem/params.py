@@ -124,8 +124,15 @@ class DemParams:
     def skin(self) -> float:
         return self.skin_factor * self.d_mean
 
-    def mass(self, r: float) -> float:
-        return self.density * math.pi * r * r * self.thickness
+    def mass(self, r):
+        """Mass [kg] of a disk of radius ``r`` [m] (a number or an array): density pi r^2
+        thickness. The one definition: the simulation's masses, the compaction's, the time step."""
+        return self.density * math.pi * (r * r) * self.thickness
+
+    def inertia(self, r):
+        """Rotational inertia [kg m^2] of a disk of radius ``r`` [m] about its axis: m r^2 / 2
+        (a uniform disk)."""
+        return 0.5 * self.mass(r) * (r * r)
 
     @property
     def dt(self) -> float:

@@ -16,7 +16,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .params import DemParams
-from .simulation import Simulation
+from .regime import check_regime
+from .simulation import Simulation, solid_fraction
 from . import walls as W
 
 
@@ -83,31 +84,34 @@ def _kpa(s) -> str:
 def compact(params: DemParams, stress=200e3, friction_deg=0.0, stress_rel_tol=0.01,
             unbalanced_tol=1e-3, max_steps=3_000_000, compaction_damping=0.3,
             compaction_vmax=1.0, target_porosity=0.16, grow_step=0.005, grow_steps=500,
-            verbose=False):
+            verbose=False, allow_soft=False):
     """Generate and compact a sample isotropically to `stress` [Pa].
 
     Friction is `friction_deg` during compaction, then restored to params.phi_g and
     the sample re-equilibrated at the same stress.  The servo runs with a higher Cundall
     damping and wall speed cap during compaction only (faster; the final state is
     re-equilibrated with the nominal values).  Returns (Simulation, CompactionReport).
+    A set outside the granular regime at `stress` is refused (``dem.regime.check_regime``,
+    a ValueError) unless ``allow_soft``.
     """
     if not (0 <= friction_deg < 90):
         raise ValueError(f"friction_deg={friction_deg!r}; allowed range: 0 <= friction_deg < 90")
     if not stress > 0:
         raise ValueError(f"stress={stress!r}; allowed range: stress > 0 [Pa]")
+    check_regime(params, stress, allow_soft)
     x, r, walls = generate(params)
     # Radius growth: start from the loose sample shrunk by s0 (radii and positions) and grow
     # the radii back to their values in place, walls servo-controlled at the target stress.
     # Every particle densifies at once, so the packing is homogeneous and no dense layer has
     # to be pushed through a granular gas by the walls (slow for 12,000 disks).
-    phi0 = math.pi * float(np.sum(r ** 2)) / ((walls[1] - walls[0]) * (walls[3] - walls[2]))
+    phi0 = solid_fraction(r, walls)
     s0 = min(1.0, math.sqrt(phi0 / (1.0 - target_porosity)))
     # rolling resistance, like friction, is off while the sample densifies
     sim = Simulation.new(params, x * s0, r * s0, walls * s0,
                          mu=math.tan(math.radians(friction_deg)), mu_r=0.0)
     # masses and inertias are those of the final radii from the start: dt stays valid
-    sim.m[:] = params.density * math.pi * r ** 2 * params.thickness
-    sim.inertia[:] = 0.5 * sim.m * r ** 2
+    sim.m[:] = params.mass(r)
+    sim.inertia[:] = params.inertia(r)
     sim.set_control(W.isotropic(stress))
     tol = stress_rel_tol * stress
 

@@ -42,6 +42,7 @@ from common.options import vocabulary_range
 
 from .anatomy import ANATOMY_COLUMNS
 from .ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_COLUMNS
+from .simulation import kinetic_energy
 
 # a check's row: the rule's columns, then the energy ledger's (dem.ledger; NaN when the run has
 # no ledger attached), then the anatomy of its contacts since the start (dem.anatomy; NaN when
@@ -114,7 +115,7 @@ def backbone_kinetic_energy(sim, snap):
     cnt = (np.bincount(snap.ci, minlength=sim.n) + np.bincount(snap.cj, minlength=sim.n)
            + np.bincount(snap.wp, minlength=sim.n))
     b = cnt >= 2
-    return 0.5 * float(np.sum(sim.m[b, None] * sim.v[b] ** 2) + np.sum(sim.inertia[b] * sim.w[b] ** 2))
+    return kinetic_energy(sim.m[b], sim.inertia[b], sim.v[b], sim.w[b])
 
 
 def voigt_strain(sim, norm: float) -> float:

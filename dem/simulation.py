@@ -18,6 +18,7 @@ from common.threads import ThreadChooser
 from . import kernels
 from .neighbours import build_pair_list, finish_pair_list
 from .params import DemParams
+from .regime import watch_contacts, watch_run
 from .walls import Control, wall_stress
 
 
@@ -70,8 +71,8 @@ class Simulation:
         c = lambda a, dt=float: np.array(a, dtype=dt, copy=True)
         self.x, self.v, self.w, self.theta = c(state.x), c(state.v), c(state.w), c(state.theta)
         self.r = c(state.r)
-        self.m = p.density * math.pi * self.r ** 2 * p.thickness
-        self.inertia = 0.5 * self.m * self.r ** 2
+        self.m = p.mass(self.r)
+        self.inertia = p.inertia(self.r)
         self.walls, self.walls_ref, self.prev = c(state.walls), c(state.walls_ref), c(state.prev)
         self.x_ref = c(state.x_ref)
         self.step = int(state.step)
@@ -95,6 +96,7 @@ class Simulation:
                                       c(state.pi, np.int32), c(state.pj, np.int32), c(state.ft),
                                       c(state.mr))
         self.n_rebuilds = 0
+        self.solid = solid_area(self.r)     # the disks' area [m^2] (the watch's porosity)
         self.vmax_override = None  # wall speed cap override [m/s] (compaction only)
         # blocks of disks run concurrently: None = one per thread of the chosen count (the
         # bits are the same either way); a test may force any number
@@ -102,6 +104,9 @@ class Simulation:
         self.threads = ThreadChooser(n)
         # the energy ledger (dem.ledger.Ledger attaches itself here); it only reads the run
         self.ledger = None
+        # the watch of the granular regime (dem.regime: after every chunk of steps and at every
+        # snapshot); it only reads the run. False: a state loaded to be inspected
+        self.watch = True
 
     # ------------------------------------------------------------------------------
     @classmethod
@@ -133,6 +138,7 @@ class Simulation:
         self.walls_ref[:] = self.walls
         self.fext[:] = 0.0
         self.n_rebuilds += 1
+        self.solid = solid_area(self.r)     # the radii change only before a rebuild (compact)
 
     def _needs_rebuild(self):
         hs = 0.5 * self.params.skin
@@ -167,10 +173,10 @@ class Simulation:
             left -= done
             self.step += done
             self.time = self.step * self.dt
+            if self.watch:      # before a rebuild, which a NaN or a disk outside would upset
+                watch_run(self)
             if self._needs_rebuild():
                 self.rebuild()
-            if self.walls[1] <= self.walls[0] or self.walls[3] <= self.walls[2]:
-                raise RuntimeError("walls crossed: the servo or strain control is unstable")
 
     def set_control(self, control: Control):
         self.control = control
@@ -186,9 +192,14 @@ class Simulation:
                      self.mu_r, self.cap_on, self.control, c(self.ref_len))
 
     def snapshot(self) -> Snapshot:
+        """The contacts now (``kernels.contact_snapshot``), their overlaps watched
+        (``dem.regime.watch_contacts``) unless ``watch`` is off."""
         pl = self.pairs
-        return Snapshot(*kernels.contact_snapshot(self.x, self.r, pl.pi, pl.pj, pl.ft,
+        snap = Snapshot(*kernels.contact_snapshot(self.x, self.r, pl.pi, pl.pj, pl.ft,
                                                   self.walls, self.params.kn))
+        if self.watch:
+            watch_contacts(self, snap)
+        return snap
 
     # Measures ------------------------------------------------------------------------
     @property
@@ -206,8 +217,8 @@ class Simulation:
         return w * h * self.params.thickness
 
     def porosity(self):
-        w, h = self.size
-        return 1.0 - math.pi * float(np.sum(self.r ** 2)) / (w * h)
+        """1 - the disks' area over the box's (``solid_fraction``)."""
+        return 1.0 - solid_fraction(self.r, self.walls)
 
     def wall_stress(self, snap: Snapshot | None = None):
         """(s_xx, s_yy) [Pa], compression positive, from the wall forces at the current
@@ -239,7 +250,42 @@ class Simulation:
         return float(np.hypot(f[:, 0], f[:, 1]).mean() / fc.mean())
 
     def kinetic_energy(self):
-        return 0.5 * float(np.sum(self.m[:, None] * self.v ** 2) + np.sum(self.inertia * self.w ** 2))
+        """Kinetic energy of the disks [J] (``kinetic_energy``)."""
+        return kinetic_energy(self.m, self.inertia, self.v, self.w)
+
+
+def kinetic_energy(m, inertia, v, w) -> float:
+    """Kinetic energy [J] of disks of masses ``m``, rotational inertias ``inertia`` (N,),
+    velocities ``v`` (N,2) and spins ``w`` (N,): 1/2 sum(m |v|^2 + I w^2). The one definition
+    (``Simulation.kinetic_energy``, the backbone's of ``dem.settle``)."""
+    return 0.5 * float(np.sum(m[:, None] * v ** 2) + np.sum(inertia * w ** 2))
+
+
+def confining_stress(state) -> float:
+    """The confining stress [Pa] of a state (for ``dem.regime.check_regime``): the smaller of its
+    two wall stresses at its positions (sigma2 of the biaxial test it comes from), or the stress
+    its control holds an axis at (``walls.STRESS``) where that is larger: a state's stresses come
+    from its own kn, and a soft kn puts a packing of stiff grains at a small stress that the run
+    then raises."""
+    from .walls import STRESS
+    sim = Simulation(state)
+    sim.watch = False           # a state to be judged, not a run
+    c = state.control
+    held = [abs(float(c.s_to[k])) for k in (0, 1) if c.mode[k] == STRESS]
+    return max([float(min(sim.wall_stress()))] + held)
+
+
+def solid_area(r) -> float:
+    """The disks' area sum(pi r^2) [m^2] (radii ``r``)."""
+    return math.pi * float(np.sum(r ** 2))
+
+
+def solid_fraction(r, walls) -> float:
+    """The disks' area over the box's, sum(pi r^2) / (W H) [-], ``walls`` = [x_left, x_right,
+    y_bottom, y_top]: one minus the porosity (``Simulation.porosity``, the compaction's start;
+    the watch of ``dem.regime`` divides ``Simulation.solid``, the same area kept since the last
+    rebuild, by the box's)."""
+    return solid_area(r) / ((walls[1] - walls[0]) * (walls[3] - walls[2]))
 
 
 def validate_geometry(x, r, walls):

@@ -288,8 +288,10 @@ def test_every_quantity_has_a_unit_and_every_switch_is_positive_or_no():
     for t in VOCABULARY.values():
         if t.kind in ("real", "reals"):
             assert t.unit, f"{t.name} is a quantity with no unit ('-' if dimensionless)"
+        # --allow-soft, like --force, permits what is refused otherwise (dem.regime)
         if t.kind == "flag" and t.name not in ("--quiet", "--force", "--resume", "--full",
-                                               "--busy-core", "--check-tangent"):
+                                               "--busy-core", "--check-tangent",
+                                               "--allow-soft"):
             assert t.name.startswith("--no-"), f"{t.name}: a negative switch is --no-..."
         assert not t.name.startswith("--skip"), t.name
 

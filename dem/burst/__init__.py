@@ -60,7 +60,8 @@ from .runs import (H, HISTORY_COLUMNS, HOLD_ANATOMY_COLUMNS, HOLD_LEDGER_COLUMNS
                    PATH_COLUMNS, PATH_LEDGER_COLUMNS, PathResult, ProbeResult, RelaxResult,
                    UNLOADED, growth, hold, ke_growth, path_probe, probe_rate_of, proportional_path,
                    relax, wall_mass_rule, wall_work)
-from .theory import CLEARLY, k_noise, theory_verdict
+from .theory import (AVALANCHE, CLEARLY, Noise, k_noise, staircase_verdict, theory_verdict,
+                     verdict_of_folder)
 from .journal import checkpoint_header, read_checkpoint
 from .stairs import StairResult, staircase
 from .figures import OUTCOME_COLOR, plot_burst, plot_k_path
@@ -69,12 +70,13 @@ from .report import (BURST_COLUMNS, PROBE_COLUMNS, REST_COLUMNS, STAIR_COLUMNS, 
 # check_ratio: dem.__main__'s --ratios
 from .command import check_ratio, check_sample_size, load_starts, run_burst
 
-__all__ = ["below_row", "BURST_COLUMNS", "burst_row", "BurstOptions", "check_ratio",
+__all__ = ["AVALANCHE", "below_row", "BURST_COLUMNS", "burst_row", "BurstOptions", "check_ratio",
            "check_sample_size", "checkpoint_header", "CLEARLY", "confirm_peak", "growth", "H", "HISTORY_COLUMNS",
            "hold", "HOLD_ANATOMY_COLUMNS", "HOLD_LEDGER_COLUMNS", "HoldResult", "HOLDS", "k_noise",
+           "Noise",
            "ke_growth", "load_starts", "ONSET", "OUTCOME_COLOR", "PATH_COLUMNS",
            "PATH_LEDGER_COLUMNS", "path_probe", "PathResult", "plot_burst", "plot_k_path",
            "PROBE_COLUMNS", "probe_rate_of", "ProbeResult", "proportional_path", "read_checkpoint",
            "relax", "RelaxResult", "REST_COLUMNS", "run_burst", "scan_peak", "STAIR_COLUMNS",
-           "staircase", "StairResult", "SWITCHES", "theory_verdict", "UNLOADED", "wall_mass_rule",
-           "wall_work", "write_burst_files"]
+           "staircase", "staircase_verdict", "StairResult", "SWITCHES", "theory_verdict", "UNLOADED",
+           "verdict_of_folder", "wall_mass_rule", "wall_work", "write_burst_files"]

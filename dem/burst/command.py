@@ -101,7 +101,7 @@ def _stairs_task(args):
 
 def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = BurstOptions(),
               workers=None, threads=None, verbose=True, params_file=None, stage=None,
-              resume=False, scheduler=None):
+              resume=False, scheduler=None, allow_soft=False):
     """Every proportional path (one per ratio and start fraction), then the rest search of every
     path (``staircase``: its start relaxed at fixed strain, then G held by steps from rest until
     a hold of +dc fails; the below and past runs), each path's task an independent run spread
@@ -111,7 +111,9 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     ``resume`` continues from them (refusing a folder of other states or options). Writes
     ``out_dir``/burst.csv, history.csv, paths.csv, rest.csv, stairs.csv, summary.json,
     params.json, the states the switches started from (rest/) and the figures. Returns (burst
-    rows as dicts, summary dict)."""
+    rows as dicts, summary dict). States of parameters outside the granular regime at the test's
+    sigma2 (``dem.regime.check_biaxial_regime``) are refused unless ``allow_soft``; summary.json
+    records the regime (``regime``)."""
     from .. import io
     from common.io import atomic_write_bytes
     from ..probes import _map
@@ -121,6 +123,8 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     opts.validate()
     check_sample_size(biaxial_dir, opts)
     starts, eta_peak, params = load_starts(biaxial_dir, fractions, params_file)
+    from ..regime import check_biaxial_regime
+    regime = check_biaxial_regime(biaxial_dir, allow_soft)
     header = checkpoint_header(starts, ratios, opts)
     done = read_checkpoint(out_dir, header) if resume else []   # refused before any write
     t0 = time.time()
@@ -220,7 +224,7 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
                                              "n_unstable_excess")} for row in rows],
                "growth_rule": {"release": RELEASE, "measure": "(E_c - E_c(0)) / W2_ext of the "
                                "held step, backbone E_c (hmodel.burst_rule.energy_release)"},
-               "wall_time": time.time() - t0}
+               "regime": regime, "wall_time": time.time() - t0}
     write_burst_files(out_dir, combos, paths, stairs, rows, summary)
     # the states the switches started from stay (rest/R.._f.._switch.npz); the rest served the
     # search and a resume

@@ -1,7 +1,8 @@
 """The burst's runs (``dem.burst``): the proportional strain path under strain control
 (``proportional_path``), a state relaxed at fixed strain (``relax``), the kinematic probe of the
 path at a state at rest (``path_probe``), and the tied run holding G under a dead load or c under
-the servo (``hold``), with the growth of its kinetic energy (``ke_growth``, ``growth``); the
+the servo (``hold``), with the growth of its kinetic energy (``growth``; ``ke_growth``, the
+contract's column, is ``point.burst_rule``'s, applied to the backbone's kinetic energy); the
 columns of their records."""
 from __future__ import annotations
 
@@ -18,6 +19,9 @@ from ..ledger import COLUMNS as LEDGER_COLUMNS, EXTRA_COLUMNS as LEDGER_EXTRA_CO
 from ..settle import HISTORY_COLUMNS as SETTLE_COLUMNS, RULE_COLUMNS, settle, voigt_strain
 from ..simulation import Simulation, State
 from common.threads import ThreadChooser
+# the contract's ke_growth column (docs/burst.md): one formula for the three parts, applied here
+# to the backbone's kinetic energy at the checks (``dem.burst.report.burst_row``)
+from point.burst_rule import ke_growth  # noqa: F401
 from ..walls import strain_rate, tied
 from .options import BurstOptions, confirm_peak
 
@@ -335,22 +339,11 @@ def hold(state: State, ratio: float, c_target: float, opts: BurstOptions = Burst
     res = settle(sim, None, opts.rule(), strain_scale=voigt_strain(sim, opts.strain_norm),
                  progress=check, stress_error=error, contacts0=a0)
     sim.ledger.detach()
-    # E_c at the switch: the backbone's (disks with two contacts or more), as ke_growth's
+    # E_c at the switch: the backbone's (disks with two contacts or more), as the growth's
     return HoldResult(res.outcome, res.steps, np.asarray(hist, float), res.creep_rate,
                       time.time() - t0, opts.hold, hist[0][8], g_held, m_g, sim.state(),
                       onset[0][1] if onset else None, onset[0][0] if onset else -1,
                       onset[0][2] if onset else None, recent[0])
-
-
-def ke_growth(keb) -> float:
-    """Largest backbone kinetic energy over the one at the switch, where the sample is at rest
-    (the ``ke_growth`` column): a ratio to the kinetic-energy floor of the start, which depends on
-    how well the start had settled and on the sample's size, so it tells neither settling from
-    bursting nor one size from another (a settling run read x2e5 at 2000 disks, x27 at 300):
-    the growth measures are ``growth`` (the energy release against the work of the held step,
-    and the kinetic energy at the end against the equilibrium bound)."""
-    keb = np.asarray(keb, float)
-    return float(keb.max() / keb[0]) if keb[0] > 0 else math.inf
 
 
 def growth(history, n_disks, ke_tol) -> dict:

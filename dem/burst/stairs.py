@@ -10,7 +10,7 @@ from typing import NamedTuple
 from .journal import _Journal
 from .options import SWITCHES, BurstOptions
 from .runs import PathResult, hold, path_probe, probe_rate_of, relax
-from .theory import k_noise, theory_verdict
+from .theory import staircase_verdict
 
 
 class StairResult(NamedTuple):
@@ -28,7 +28,7 @@ class StairResult(NamedTuple):
     wall_time: float
     starts: list = []         # the journal key of the state each hold started from
     probes: dict = {}         # journal key of an equilibrium -> ProbeResult (path_probe)
-    verdict: dict = {}        # theory_verdict's, with the probes' rule
+    verdict: dict = {}        # staircase_verdict's, with the probes' rule
     baselines: dict = {}      # "below"/"past" -> index into holds of its baseline run
 
 
@@ -51,7 +51,7 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
     recorded. A path without a loaded peak gets one below run from its end, relaxed. With
     ``opts.probes``, every equilibrium (the relaxed states, the end of every hold that settled)
     is probed along the path (``path_probe``: k_path) and the theory's verdict is drawn
-    (``theory_verdict``). ``journal``: a ``_Journal`` that records every relaxation, hold and
+    (``staircase_verdict``). ``journal``: a ``_Journal`` that records every relaxation, hold and
     probe as it finishes (and gives them back on a resume)."""
     t0 = time.time()
     log = log or (lambda m: None)
@@ -142,20 +142,11 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
                     f"(dc {pr.c_after - pr.c_before:+.1f} Pa over d eps1 {pr.d_eps1:.3g}), "
                     f"{pr.outcome}")
             probes[key] = pr
-        repeats = [(probes[starts[i]], probes[f"h{i}_end"]) for i in baselines.values()
-                   if starts[i] in probes and f"h{i}_end" in probes]
-        noise, relax_noise, repeat_noise = k_noise(list(probes.values()), opts.probe_d_eps1,
-                                                   repeats)
-        eqk = [(k, c, e, probes[k].k_path if probes[k].outcome == "equilibrium" else math.nan)
-               for k, c, e in eq]
-        fails = [(starts[i], ct - cf) for i, (ro, cf, ct, h) in enumerate(holds)
-                 if ro == "stair" and h.outcome == "failure"]
-        verdict = theory_verdict(eqk, fails, noise, dc) if end == "past found" else \
-            {**theory_verdict(eqk, [], noise, dc), "why": f"the rest search ended: {end}"}
+        verdict = staircase_verdict(
+            eq, [(ro, cf, ct, h.outcome, starts[i]) for i, (ro, cf, ct, h) in enumerate(holds)],
+            probes, dc, opts.probe_d_eps1, end)
         st0 = journal.state("relaxed_start")
-        verdict.update(k_noise_relax=relax_noise, k_noise_repeat=repeat_noise,
-                       probe_d_eps1=opts.probe_d_eps1,
-                       probe_rate=probe_rate_of(len(st0.r), st0.params.dt, opts))
+        verdict["probe_rate"] = probe_rate_of(len(st0.r), st0.params.dt, opts)
         log(f"theory: {verdict['verdict']} ({verdict['why']})")
     return StairResult({k: v._replace(state=None) for k, v in relaxed.items()}, holds, c_peak,
                        e_peak, eta_peak, switches, end, time.time() - t0, starts, probes,

@@ -41,7 +41,8 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                     confining=_D.confining, eps_max=_D.eps_max,
                     post_peak_strain=_D.post_peak_strain, smooth=_D.smooth, workers=None,
                     scheduler=None, resume=False, verbose=True, task=None, stage=None,
-                    params_note=None, options: CalibrationOptions | None = None):
+                    params_note=None, options: CalibrationOptions | None = None,
+                    allow_soft=False):
     """Fit the fields ``vary`` of ``base`` (the start set) to the target's drained biaxial test
     (module docstring), every set on each of ``seeds``, the best one then on ``check_seeds``.
     The options of the search and of each test (``vary`` to ``smooth``; ``vary`` None: the
@@ -55,7 +56,10 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     report.md and summary.json; returns the summary.  ``max_evals`` counts parameter sets (each
     is len(seeds) runs).  ``task``: the run function (default: the DEM run
     ``_evaluate_task``; tests pass a cheap one).  ``stage``: an ``common.options.Stage`` told
-    where the run is and what it has written (for the line of an interrupted command)."""
+    where the run is and what it has written (for the line of an interrupted command).
+    ``allow_soft``: search a space whose softest set lies outside the granular regime at
+    ``confining`` (``dem.regime.softest``, ``check_regime``; refused otherwise, before anything is
+    written); summary.json records the regime of that set (``regime``)."""
     t0 = time.time()
     keywords = dict(bounds=bounds, target=target, seeds=seeds, check_seeds=check_seeds,
                     initial=initial, batch=batch, max_evals=max_evals, rate=rate,
@@ -74,6 +78,9 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                                                   o.confining)
     eps_max, post_peak_strain, smooth = o.eps_max, o.post_peak_strain, o.smooth
     space = make_space(vary, base, bounds)
+    from ..regime import check_regime, softest
+    soft_set, where = softest(space, base)
+    regime = check_regime(soft_set, confining, allow_soft, where, "--sigma2")
     header = _header(target, space, base, seeds, initial, batch, max_evals, rate, confining,
                      eps_max, post_peak_strain, smooth)
     ck = os.path.join(out_dir, "evaluations.jsonl")
@@ -142,7 +149,8 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                 tasks.append(((i, s), {"key": key, "params": d, "rate": rate,
                                        "confining": confining, "eps_max": eps_max,
                                        "post_peak_strain": post_peak_strain, "work_dir": wd,
-                                       "resume": bool(resume)}))
+                                       "resume": bool(resume),
+                                       "allow_soft": bool(allow_soft)}))
 
         def collect(tag, res):
             _log(sink, res)
@@ -247,7 +255,8 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         _score_figure(out_dir, space, records, best, model)
     verdict = _verdict(space, records, best, hfig, why, info, check, check_mean)
     summary = {"target": target, "target_figures": hfig, "tolerances": TOLERANCES,
-               "peak_fraction": PEAK_FRACTION, "options": header, "stopped": why,
+               "peak_fraction": PEAK_FRACTION, "options": header, "regime": regime,
+               "stopped": why,
                "evaluations": len(records), "runs": len(records) * len(seeds) + len(check),
                "run_now": counts["run"], "taken_from_checkpoint": counts["taken"],
                "trace": trace, "met": best["met"], "verdict": verdict,

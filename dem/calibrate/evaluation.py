@@ -47,7 +47,7 @@ def _evaluate_task(a):
         res = run_biaxial(params, wd, rate=a["rate"], confining=a["confining"],
                           eps_max=a["eps_max"], post_peak_strain=a["post_peak_strain"],
                           resume=a["resume"], verbose=False, figures=False, vtk=False,
-                          save_fractions=())
+                          save_fractions=(), allow_soft=a.get("allow_soft", False))
         rows = np.asarray(res.rows, float)
         with open(os.path.join(wd, "summary.json")) as f:
             comp = json.load(f).get("compaction", {})

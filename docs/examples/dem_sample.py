@@ -29,4 +29,4 @@ rows, summary = run_burst("out/api_dem/biaxial", "out/api_dem/burst", [-2.0], [0
                           BurstOptions(), workers=1, verbose=False)
 for row in rows:
     print(f"burst R = {row['ratio']:g}, {row['switch']}: {row['outcome']} after {row['steps']} "
-          f"steps (backbone kinetic energy x{row['ke_growth']:.3g})")
+          f"steps (E_c gained at most {row['ke_w2ext_max']:.3g} x the held step's work)")

@@ -269,9 +269,14 @@ def test_verdict_contradicted_and_the_cases_without_one():
         "no verdict"
     assert theory_verdict(_eqs([5e7, -3e7]), [("e1", 100.0)], math.nan, 100.0)["verdict"] == \
         "no verdict"
-    # k_path within the noise already at the start: no crossing located, the verdict stands
+    # k_path within the noise already at the start: no hold could have contradicted the theory,
+    # so it does not pass (it did before issue 41: a verdict that could not fail)
     v = theory_verdict(_eqs([1e6, -3e7]), [("e1", 100.0)], 1e6, 100.0)
-    assert v["verdict"] == "passes" and math.isnan(v["c_cross"]) and "first" in v["why"]
+    assert v["verdict"] == "no verdict" and math.isnan(v["c_cross"])
+    assert "no equilibrium where k_path is clearly positive" in v["why"]
+    # clearly positive, then only within the noise up to the failing hold: no crossing, no verdict
+    v = theory_verdict(_eqs([5e7, 3e7, 1e6]), [("e2", 100.0)], 1e6, 100.0)
+    assert v["verdict"] == "no verdict" and "no crossing" in v["why"]
 
 
 def test_the_crossing_after_the_last_clearly_positive_k_path_and_the_noise_of_repeats():
@@ -285,9 +290,47 @@ def test_the_crossing_after_the_last_clearly_positive_k_path_and_the_noise_of_re
     assert v["c_cross"] == pytest.approx(70e3 + 2e3 * 3.3 / 8.3, rel=1e-12)
     # the noise: the larger of the relaxations' (sqrt 2 RMS of c_before - c_state over d eps1,
     # the dead-load equilibria only) and the repeats' (RMS of the pairs' differences / sqrt 2)
+    # over the pairs of opposite sign; a pair of one sign is the state's response, reported apart
     p = lambda key, dz, k: ProbeResult(key, 0.0, dz, 0.0, 0.0, 1e-5, k, 0.0, "equilibrium", 1, 0.0)
-    probes = [p("relaxed_start", 500.0, 1e8), p("h1_end", 30.0, 6e7), p("h2_end", -40.0, 2e7)]
-    noise, relax, rep = k_noise(probes, 1e-5, [(probes[1], probes[2])])
-    assert relax == pytest.approx(math.sqrt(2) * math.sqrt((30.0 ** 2 + 40.0 ** 2) / 2) / 1e-5)
-    assert rep == pytest.approx(4e7 / math.sqrt(2)) and noise == max(relax, rep) == rep
-    assert k_noise(probes[:1], 1e-5)[0] != k_noise(probes[:1], 1e-5)[0]      # nan: none of either
+    probes = [p("relaxed_start", 500.0, 1e8), p("h1_end", 30.0, 6e7), p("h2_end", -40.0, 2e7),
+              p("h3_end", 10.0, -2e7)]
+    n = k_noise(probes, 1e-5, [(probes[1], probes[2])])
+    relax = math.sqrt(2) * math.sqrt((30.0 ** 2 + 40.0 ** 2 + 10.0 ** 2) / 3) / 1e-5
+    assert n.relax == pytest.approx(relax) and n.noise == n.relax
+    assert math.isnan(n.repeat) and n.same_sign == pytest.approx(4e7 / math.sqrt(2))
+    n = k_noise(probes, 1e-5, [(probes[1], probes[2]), (probes[2], probes[3])])
+    assert n.repeat == pytest.approx(4e7 / math.sqrt(2)) and n.noise == n.repeat
+    assert n.avalanches == () and n.k_max == 1e8
+    assert k_noise(probes[:1], 1e-5).noise != k_noise(probes[:1], 1e-5).noise  # nan: none of either
+
+
+def test_an_avalanche_set_off_by_a_probe_cannot_make_the_verdict_pass():
+    """The issue's staircase (issue 41): the probe of the failing hold's baseline end, the last
+    equilibrium held once more, set off an avalanche (c fell 22.9 kPa for d eps1 = 1e-5: k_path
+    -2.29e9 Pa against -2.06e8 Pa at the equilibrium itself). Counted as noise, that pair made
+    it 1.04e9 Pa, 250 times the relaxations' 4.2e6 Pa, nothing clearly positive, no crossing,
+    and the verdict said `passes`. Now: with that noise the verdict cannot pass (it could not
+    have been contradicted); the noise leaves the pair out (one sign, and an avalanche) and keeps
+    the relaxations'; with it the verdict is drawn, and it can fail."""
+    from dem.burst import ProbeResult, k_noise, theory_verdict
+    ks = [2.7e8, 1.2e8, 6.0e7, 2.5e7, -2.06e8]
+    eqs = _eqs(ks)
+    assert theory_verdict(eqs, [("e4", 100.0)], 1.04e9, 100.0)["verdict"] == "no verdict"
+    dz = 4.2e6 * 1e-5 / math.sqrt(2)       # the relaxations' change of c that gives 4.2e6 Pa
+    p = lambda key, k, sign=1.0: ProbeResult(key, 0.0, sign * dz, 0.0, 0.0, 1e-5, k, 0.0,
+                                             "equilibrium", 1, 0.0)
+    probes = [p("relaxed_start", ks[0])] + [p(f"h{i}_end", k, (-1) ** i)
+                                            for i, k in enumerate(ks[1:])]
+    below, past = p("h6_end", 1.19e8), p("h7_end", -2.29e9)      # the baselines' ends
+    repeats = [(probes[2], below), (probes[4], past)]
+    # the former estimate, every pair: 1.04e9 Pa
+    every = math.sqrt(np.mean([(a.k_path - b.k_path) ** 2 for a, b in repeats]) / 2)
+    assert every == pytest.approx(1.04e9, rel=5e-3)        # the issue gives it to 3 digits
+    n = k_noise(probes + [below, past], 1e-5, repeats)
+    assert n.noise == pytest.approx(4.2e6, rel=1e-9) == n.relax and math.isnan(n.repeat)
+    assert n.avalanches == (("h7_end", -2.29e9),) and n.same_sign == pytest.approx(every)
+    v = theory_verdict(eqs, [("e4", 100.0)], n.noise, 100.0)
+    assert v["verdict"] == "passes" and v["n_clearly_positive"] == 4
+    assert v["c_cross"] == pytest.approx(66e3 + 2e3 * 2.5e7 / (2.5e7 + 2.06e8), rel=1e-12)
+    # and it can fail: the hold of +dc failing one equilibrium earlier contradicts it
+    assert theory_verdict(eqs, [("e3", 100.0)], n.noise, 100.0)["verdict"] == "contradicted"

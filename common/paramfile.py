@@ -35,7 +35,10 @@ def field_kinds(cls) -> dict:
     for f in fields(cls):
         if f.name.startswith("_"):
             continue
-        t = str(f.type).replace(" ", "")
+        # the annotation as text ("float": a module with postponed annotations) or the type
+        # itself (float, float | None: a record written without them)
+        t = (f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type)))
+        t = t.replace(" ", "")
         kinds[f.name] = {"float": "real", "int": "int", "float|None": "real or null"}[t]
     return kinds
 

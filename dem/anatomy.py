@@ -1,6 +1,5 @@
 """The anatomy of a burst at the grain scale: which contacts give up second-order work, where,
-and how they gather (``shared/spec/burst.md``, "The DEM from rest", paragraph "Anatomy";
-``docs/dem.md``, "The anatomy of a burst").
+and how they gather (``docs/dem.md``, "The anatomy of a burst").
 
 Hadda, Nicot, Wan & Darve (2015, 2D DEM, drained and proportional strain paths): the contacts
 whose own second-order work is negative ("unstable contacts") gather in clusters; a sustained

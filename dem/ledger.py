@@ -1,6 +1,6 @@
 """The energy ledger of a DEM run: where the kinetic energy comes from (paper Eq. 1).
 
-Definitions (leapfrog-consistent; ``shared/spec/burst.md``, "The DEM from rest").  The kernel's
+Definitions (leapfrog-consistent; docs/dem.md, "The energy ledger").  The kernel's
 leapfrog is v(n+1/2) = v(n-1/2) + dt (F(n) + D(n)) / m, x(n+1) = x(n) + dt v(n+1/2), with F(n)
 the contact and wall forces of step n and D(n) the Cundall damping force.  With the kinetic
 energy at half steps, E_c(n+1/2) = sum 1/2 m v(n+1/2)^2 + 1/2 I w(n+1/2)^2, and the centred

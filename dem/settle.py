@@ -27,7 +27,7 @@ alike for a while.  ``settle`` runs the sample under its current control, checks
 * **undecided**: neither by ``max_steps``; its creep rate (strain rate over the last window,
   1/s) is reported.
 
-The thresholds come from the probe histories in ``shared/spec/dem-directional.md`` (1000 and
+The thresholds come from probe histories measured for this rule (docs/dem.md, "How a probe ends"; 1000 and
 2000 disks): settled probes reach at most ~220 times the elastic strain and hold the stresses
 to < 1 Pa after ~50,000 steps; runaways pass 400 times with stress errors of kPa.
 """

@@ -94,3 +94,32 @@ def test_a_gallery_readme_gives_its_command_and_its_date(readme):
         f"{readme.relative_to(ROOT)}: no command that reproduces it"
     assert re.search(r"\b\d{1,2} (November|December) 20\d\d\b|\bcommit [0-9a-f]{7}", text), \
         f"{readme.relative_to(ROOT)}: no date or commit"
+
+
+# what points outside the project: the specification's folder beside the repository, a machine's
+# own folders (an output folder DIR/work/KEY of the calibration is the project's: "/work/" after a
+# name is not a machine path)
+OUTSIDE = re.compile(r"shared/(spec|reference|papers)|\.\./shared\b|(?<![\w/])/work/|(?<![\w/])/root/"
+                     r"|(?<![\w/])/tmp/[\w.-]+/")
+
+
+def _tracked_text_files():
+    import subprocess
+    names = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True,
+                           check=True).stdout.split()
+    for n in names:
+        p = ROOT / n
+        if n == "tests/test_manual_docs.py" or not p.is_file() or p.stat().st_size > 4_000_000:
+            continue
+        try:
+            yield n, p.read_text()
+        except UnicodeDecodeError:
+            continue
+
+
+def test_no_file_points_outside_the_project():
+    """A user has the project only: no file of it (code, docs, the galleries' records, tests)
+    names the specification's folder beside the repository or a path of a development machine."""
+    bad = [f"{n}:{i}: {line.strip()[:100]}" for n, text in _tracked_text_files()
+           for i, line in enumerate(text.splitlines(), 1) if OUTSIDE.search(line)]
+    assert not bad, "files point outside the project:\n" + "\n".join(bad[:40])

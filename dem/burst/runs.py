@@ -191,7 +191,7 @@ class ProbeResult(NamedTuple):
 def path_probe(state: State, ratio: float, opts: BurstOptions = BurstOptions(), threads=None,
                key: str = "") -> ProbeResult:
     """The second-order work of the path's own direction at a state at rest, measured without a
-    burst (``shared/spec/burst.md``, "What the DEM's burst proves"): ``state`` relaxed at fixed
+    burst (docs/burst.md, "The DEM: what its burst proves"): ``state`` relaxed at fixed
     strain (``relax``: c_before, the c it keeps at rest; its change from the state's c is a
     sample of the noise of c at rest), the tied walls then moved along the path, d eps2 = R
     d eps1, by ``opts.probe_d_eps1`` at the axial rate ``probe_rate_of`` (strain control:

@@ -1,4 +1,5 @@
-"""A constitutive law of one's own, written as a user would, run through the toolkit: a plane
+"""A constitutive law of one's own, written as a user would, run through the toolkit (the
+material point's drained test, domain and probes, and the FE specimen): a plane
 version of Kolymbas' four-term hypoplastic law (Kolymbas 1991), which has no yield surface and
 no elastic range (its response is incrementally non-linear: the tangent depends on the
 direction of the strain increment), compression positive:
@@ -16,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from fem.biaxial import BiaxialConfig, run_biaxial
 from point import Material, MaterialError, ParamError, check_tangent, register
 from point.experiment import biaxial_test, domain_point
 from point.probes import arcs, directional_sweep, format_arcs
@@ -107,3 +109,8 @@ if __name__ == "__main__":
     sw = directional_sweep(rA.state, P, n=360)
     print(f"at q/p = {eta[kA]:.3f}: the cone W2 <= 0 in alpha_sigma "
           f"{format_arcs(arcs(sw.alpha_sigma, sw.w2 <= 0))} deg, min w2 = {np.min(sw.w2):.4f}")
+    # the FE specimen of the same law: the structure loses uniqueness where its points do
+    cfg = BiaxialConfig(nx=2, ny=4, eps1_max=0.01, d_eps1=2e-4, fields=False, n_sphere=100)
+    ev = run_biaxial(cfg.with_params(P)).summary["events"]
+    print(f"FE specimen (2 x 4 quads): lam_min(K_s) <= 0 under force control at q/p = "
+          f"{ev['lam_min_ks_f']['eta']:.3f}, the points' min W2 <= 0 at {ev['local_w2']['eta']:.3f}")

@@ -386,7 +386,7 @@ def test_eq1_in_second_order_form_in_every_probe(state300_near_peak):
 
 
 def test_published_1000_disk_curve_to_the_bit_with_the_ledger(tmp_path):
-    # shared/reference/dem1000_seed1_rate005.csv (copied to tests/dem/data): the mechanical
+    # tests/dem/data/dem1000_seed1_rate005.csv (the published curve): the mechanical
     # columns of `python -m dem biaxial --n 1000 --seed 1 --rate 0.05 --threads 1 --no-vtk`, as
     # released on 2026-12-03. The ledger is on in every biaxial run now; the curve must not
     # move by a bit, and the ledger's balance closes along it.

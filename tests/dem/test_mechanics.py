@@ -88,7 +88,7 @@ from dem.walls import strain_rate
 # ------------------------------------------------------------------------------------------
 def _brute_force_step(x, v, w, r, walls, pl, kn, kt, mu, dt):
     """The contact forces of one step, from scratch over all N (N - 1) / 2 pairs and all four
-    walls, with the law of ``spec/dem.md`` written here (not the kernel's): a pair touches when
+    walls, with the law of docs/dem.md ("Model") written here (not the kernel's): a pair touches when
     |x_j - x_i| < r_i + r_j; n = (x_j - x_i) / |.|, t = z x n; f_n = kn overlap; the tangential
     force f_t = f_t(old) + kt v_t dt capped at mu f_n, with v_t = (v_j - v_i) . t - (w_i r_i +
     w_j r_j) the slip of j's contact point on i's and f_t(old) the pair list's history (0 for a

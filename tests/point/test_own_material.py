@@ -68,3 +68,20 @@ def test_w2_vanishes_before_the_drained_limit(example):
     assert d.q_w2 / d.p_w2 < d.q_peak / d.p_peak - 0.05
     sw = directional_sweep(biaxial_test(P, d_eps1=1e-4, eps1_max=d.eps1_w2).state, P, n=360)
     assert np.min(sw.w2) <= 0.0
+
+
+def test_the_fe_specimen_of_the_users_law(example):
+    """The FE specimen takes the user's law as any other: homogeneous (no imperfection), its
+    lam_min(K_s) under force control fires at the step where its points' lam_min(D_s) does
+    (K_s = sum w B^T D_s B, every homogeneous field admissible), and that step lies within one
+    load step of the material point's own onset under the same control."""
+    from fem.biaxial import BiaxialConfig, run_biaxial
+    from fem.reference import material_point_criteria
+    P = example.HypoParams()
+    res = run_biaxial(BiaxialConfig(nx=2, ny=4, eps1_max=0.008, d_eps1=2e-4, fields=False,
+                                    n_sphere=100).with_params(P))
+    ev = res.summary["events"]
+    assert ev["lam_min_ks_f"]["row"] == ev["local_lam_Ds"]["row"] is not None
+    mp = material_point_criteria(P, 2e-4, 40)
+    k = int(np.flatnonzero(mp["lam_min_ds_force"] <= 0)[0])
+    assert abs(ev["lam_min_ks_f"]["row"] - k) <= 1

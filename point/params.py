@@ -20,7 +20,7 @@ from common import options as opt
 from common.options import VOCABULARY, OptionError, option_of
 from common.paramfile import override, read_params, write_params
 
-from .contract import _BUILTIN, ParamError, material_named, material_of
+from .contract import _BUILTIN, MATERIALS, ParamError, material_named, material_of
 
 __all__ = ["DEFAULT_LAW", "known_laws", "writer_of", "file_model", "law_of_file", "load_params",
            "save_params", "record_params", "record_options", "param_options", "param_option_error",
@@ -31,11 +31,10 @@ DEFAULT_LAW = "hmodel"
 
 
 def known_laws() -> list:
-    """The names of the laws a command line offers: the built-in ones (the H-model and
-    Drucker-Prager). A law of one's own, registered in a script (``point.register``), runs
-    through the library; a command line's options and pages do not depend on what a process
-    happened to register."""
-    return list(_BUILTIN)
+    """The names of the laws a command line offers: the built-in ones, then those registered
+    (``point.register``) in this process (a script that registers its own law and calls
+    ``point.cli.main``)."""
+    return list(_BUILTIN) + [n for n in MATERIALS if n not in _BUILTIN]
 
 
 def writer_of(law) -> str:

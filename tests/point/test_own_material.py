@@ -17,10 +17,14 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def example():
+    """The example's module; its law registered for this module's tests only (a law left
+    registered would be offered by every command line the later tests build)."""
+    from point import contract
     spec = importlib.util.spec_from_file_location("own_material", ROOT / "docs/examples/own_material.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    return mod
+    yield mod
+    contract.MATERIALS.pop(mod.HYPOPLASTIC.name, None)
 
 
 @pytest.fixture(scope="module")

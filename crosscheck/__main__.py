@@ -59,8 +59,18 @@ def check(a):
     from dem.params import load_params
     from hmodel.params import load_params as load_hparams
     opt.check_out_dir(a.out)
-    if a.dem_params:
-        load_params(a.dem_params, option="--dem-params")
+    dem_set = load_params(a.dem_params, option="--dem-params") if a.dem_params else None
+    if not a.no_dem:
+        # the DEM sample of a set outside the granular regime is no packing to hold the theory
+        # against: refused here, before the H-model's and the FE's parts run (no --allow-soft:
+        # `python -m dem` runs such a set for its own study)
+        from dem.params import DemParams
+        from dem.regime import check_regime
+        from .run import SIGMA2
+        check_regime(dem_set or DemParams(), SIGMA2, False,
+                     f"--dem-params {a.dem_params}" if a.dem_params else "the paper's set", "",
+                     "the cross-check holds the theory against granular packings only "
+                     "(python -m dem biaxial --allow-soft runs such a set for its own study)")
     if a.hmodel_params:
         load_hparams(a.hmodel_params, option="--hmodel-params")
     check_run_options(a)
@@ -73,9 +83,21 @@ def check(a):
 
 
 def main(argv=None) -> int:
-    """``python -m crosscheck ...``: 0 done, 2 bad option (one line), 130 / 143 interrupted."""
+    """``python -m crosscheck ...``: 0 done, 1 a DEM run stopped on an unsound state (one line,
+    its state kept in the DEM's folder), 2 bad option (one line), 130 / 143 interrupted."""
     def run(a, stage):
         check(a)
+        from dem.regime import UnsoundState
+        try:
+            return _run(a, stage)
+        except UnsoundState as e:     # a run's failure, not bad input: one line, exit 1
+            from dem.io import save_unsound
+            kept = save_unsound(e, os.path.join(a.out, "dem"))
+            print(f"stopped: {e}" + (f"; the state is kept in {kept}" if kept else ""),
+                  file=sys.stderr)
+            return 1
+
+    def _run(a, stage):
         stage.at("crosscheck (run it again with --resume to continue)")
         from dem.__main__ import compile_kernels_once
         compile_kernels_once()        # before the run's own timers start

@@ -19,6 +19,7 @@ __all__ = ["run_crosscheck", "DEFAULT_SMALL", "DEFAULT_FULL"]
 # slow creep at the edge of the plastic zone needs ~120,000-260,000 steps at 1000 disks
 # (20 equilibrium windows of the sample: 20 x 20,000 steps at 1000 disks, 20 x 70,000 at 12,000,
 # where plastic probes settle in 210,000-390,000 steps and two of them crept past 400,000)
+SIGMA2 = 200e3     # [Pa] the confining stress of the three parts: the DEM sample's (the paper's)
 DEFAULT_SMALL = {"n": 1000, "rate": 0.05, "max_steps": 400_000}
 DEFAULT_FULL = {"n": 12000, "rate": 0.01, "max_steps": 1_400_000}
 

@@ -80,11 +80,13 @@ class SoftContactError(ValueError):
 
 
 def check_regime(params, sigma2: float, allow_soft: bool = False, where: str = "",
-                 sigma_option: str = "--sigma2") -> dict:
+                 sigma_option: str = "--sigma2",
+                 anyway: str = "--allow-soft runs it anyway") -> dict:
     """``regime(params, sigma2)``, or SoftContactError of one line (naming kn/D, the stiffness
     number and what to change) where kappa < KAPPA_MIN and not ``allow_soft``. ``where``: what
     the parameters are, as the message starts ("--kn-over-d 1e+07", "the state's parameters
-    (--state S)"); ``sigma_option``: the option of the confining stress, if any."""
+    (--state S)"); ``sigma_option``: the option of the confining stress, if any; ``anyway``:
+    how the command runs such a set all the same, as the message ends."""
     got = regime(params, sigma2, allow_soft)
     if got["inside"] or allow_soft:
         return got
@@ -97,7 +99,7 @@ def check_regime(params, sigma2: float, allow_soft: bool = False, where: str = "
         f"D {params.d_mean:g} m, t {params.thickness:g} m, sigma2 {sigma2 / 1e3:g} kPa) puts a "
         f"contact's overlap at {100.0 / k:.3g} % of the diameter, outside the granular regime; "
         f"allowed: a stiffness number >= {KAPPA_MIN:g} (overlap <= {100.0 / KAPPA_MIN:g} %), "
-        f"here kn/D >= {need:.3g} Pa{sig}; --allow-soft runs it anyway")
+        f"here kn/D >= {need:.3g} Pa{sig}; {anyway}")
 
 
 def softest(space, base):

@@ -182,3 +182,45 @@ def test_the_watch_never_moves_a_trajectory(small_sample):
         s.run(300)
     for name in ("x", "v", "w", "theta", "walls", "prev"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
+# -- the cross-check's DEM: the same rules ----------------------------------------------------
+def test_the_crosscheck_refuses_a_soft_dem_set_before_any_part_runs(tmp_path, capsys):
+    """A soft --dem-params is refused by ``python -m crosscheck`` before the H-model's and the
+    FE's parts run (they took minutes before the DEM refused it): one line naming the file,
+    kn/D and the stiffness number, exit 2, no folder; with --no-dem the file is not the DEM's
+    sample, so it is not judged."""
+    from dem.params import save_params
+    soft = tmp_path / "soft.json"
+    save_params(soft, DemParams().replace(kn_over_d=1e7))
+    out = tmp_path / "X"
+    code, err = _run(["crosscheck", "--dem-params", str(soft), "--out", str(out)], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith(f"error: --dem-params {soft}: the stiffness number kn/(sigma2 t) "
+                             "= 0.85 (kn/D 1e+07 Pa"), err
+    assert "granular packings only" in err[0] and "--allow-soft" in err[0]
+    assert not out.exists()
+
+
+def test_the_crosscheck_stops_on_an_unsound_dem_state_in_one_line(tmp_path, capsys, monkeypatch):
+    """A NaN velocity injected into the cross-check's DEM compaction (the first watch of its
+    run): one line naming the outcome, exit 1, the state kept in the DEM's folder, never a
+    traceback (it was one before). The H-model's and FE's parts run first (about 20 s)."""
+    from dem import io, simulation
+
+    real = simulation.watch_run
+
+    def poisoned(sim):
+        sim.v[7, 0] = np.nan
+        return real(sim)
+
+    monkeypatch.setattr(simulation, "watch_run", poisoned)
+    out = tmp_path / "X"
+    code, err = _run(["crosscheck", "--n", "300", "--no-domain", "--no-burst", "--workers", "1",
+                      "--quiet", "--out", str(out)], capsys)
+    assert code == 1 and len(err) == 1, err
+    assert err[0].startswith("stopped: unsound state (non_finite_state) at step "), err
+    kept = out / "dem" / R.KEPT
+    assert str(kept) in err[0]
+    st, meta = io.load_state(kept)
+    assert meta["outcome"] == "non_finite_state" and np.isnan(st.v[7, 0])

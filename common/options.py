@@ -506,12 +506,15 @@ VOCABULARY = {t.name: t for t in (
        "means", None, "text"),
     _T("--check-seeds", "comma-separated samples (seeds) the best set is then run on, not among "
        "--seeds; the check's verdict is their mean", None, "text"),
+    _T("--no-first-run-decision", "every set on every one of --seeds (by default a set whose "
+       "first run misses a target by more than the sample's scatter lets the seeds' mean reach "
+       "runs on no other seed)", None, "flag"),
     _T("--initial", "sets of the space-filling (Sobol) design before the model proposes any (at "
        "least the varied parameters + 2)", "-", "int", fields=("CalibrationOptions.initial",)),
     _T("--batch", "sets the model proposes per round", "-", "int",
        fields=("CalibrationOptions.batch",)),
-    _T("--max-evals", "parameter sets at most, the start set included, each run on every seed "
-       "(may be raised on --resume)", "-", "int", fields=("CalibrationOptions.max_evals",)),
+    _T("--max-evals", "parameter sets at most, the start set included, each run on its first "
+       "seed and on the others unless that run decides it (may be raised on --resume)", "-", "int", fields=("CalibrationOptions.max_evals",)),
     _T("--full", "the paper's 12,000 disks at 0.01/s (see README for the time)", None, "flag"),
     _T("--no-dem", "H-model and FE only", None, "flag", old=(("--skip-dem", ()),)),
     _T("--no-domain", "no H-model bifurcation domain", None, "flag"),

@@ -23,8 +23,9 @@ from .figures import _figure, _score_figure, _search_figure
 from .report import FIGURE_COLS, _report, _spread, _verdict, _write_csv, _write_runs_csv
 from .search import (FigureModel, dense_points, identifiability, make_space, space_dim_min,
                      surrogate_search)
-from .targets import (DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TOLERANCES,
-                      _fmt_figs, _fmt_values, compare, curve_figures, hmodel_curve)
+from .targets import (DECIDE_Z, DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TOLERANCES,
+                      _fmt_figs, _fmt_values, compare, curve_figures, first_run_decides,
+                      hmodel_curve, one_run_scatter)
 
 
 def _say(verbose, msg):
@@ -39,12 +40,16 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                     seeds=_D.seeds, check_seeds=_D.check_seeds, initial=_D.initial,
                     batch=_D.batch, max_evals=_D.max_evals, rate=_D.rate,
                     confining=_D.confining, eps_max=_D.eps_max,
-                    post_peak_strain=_D.post_peak_strain, smooth=_D.smooth, workers=None,
+                    post_peak_strain=_D.post_peak_strain, smooth=_D.smooth,
+                    decide_on_first_run=_D.decide_on_first_run, workers=None,
                     scheduler=None, resume=False, verbose=True, task=None, stage=None,
                     params_note=None, options: CalibrationOptions | None = None,
                     allow_soft=False):
     """Fit the fields ``vary`` of ``base`` (the start set) to the target's drained biaxial test
-    (module docstring), every set on each of ``seeds``, the best one then on ``check_seeds``.
+    (module docstring), every set on the first of ``seeds`` and on the others where that run
+    does not decide it missed (``targets.first_run_decides``; on each without
+    ``decide_on_first_run``), the
+    best one then on ``check_seeds``.
     The options of the search and of each test (``vary`` to ``smooth``; ``vary`` None: the
     default --vary) may be given as keywords or as one ``options`` record
     (``CalibrationOptions``), not both; either way ``CalibrationOptions.validate`` checks them
@@ -54,7 +59,7 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     ``base``; ``params_note`` says where it came from), calibrated.json (the best set, with the
     first seed), curves.csv, calibration.png, calibration_search.png, calibration_score.png,
     report.md and summary.json; returns the summary.  ``max_evals`` counts parameter sets (each
-    is len(seeds) runs).  ``task``: the run function (default: the DEM run
+    one run or len(seeds) runs).  ``task``: the run function (default: the DEM run
     ``_evaluate_task``; tests pass a cheap one).  ``stage``: an ``common.options.Stage`` told
     where the run is and what it has written (for the line of an interrupted command).
     ``allow_soft``: search a space whose softest set lies outside the granular regime at
@@ -64,7 +69,7 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     keywords = dict(bounds=bounds, target=target, seeds=seeds, check_seeds=check_seeds,
                     initial=initial, batch=batch, max_evals=max_evals, rate=rate,
                     confining=confining, eps_max=eps_max, post_peak_strain=post_peak_strain,
-                    smooth=smooth)
+                    smooth=smooth, decide_on_first_run=decide_on_first_run)
     if options is None:
         options = CalibrationOptions(**keywords, **({} if vary is None else {"vary": vary}))
     elif vary is not None or any(v != getattr(_D, k) for k, v in keywords.items()):
@@ -123,11 +128,14 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     task = task or _evaluate_task
     where = stage
 
-    def run_sets(points, stage, set_seeds):
-        """Runs of every point on every seed of set_seeds: {(i, seed): result}."""
+    def run_sets(points, stage, set_seeds, which=None):
+        """Runs of the points ``which`` (indices into points; default all) on every seed of
+        set_seeds: {(i, seed): result}."""
         got = {}
         tasks = []
         for i, v in enumerate(points):
+            if which is not None and i not in which:
+                continue
             for s in set_seeds:
                 d = space.params(base, v).replace(seed=s).to_dict()
                 key = params_key(d)
@@ -180,17 +188,42 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         _map(tasks, collect, workers, scheduler, fn=task)
         return got
 
+    def first_run(res):
+        """The figures a set's first run decides as missed by its seeds' mean (none with
+        --no-first-run-decision): ``targets.first_run_decides``."""
+        if not o.decide_on_first_run:
+            return []
+        fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
+                            eps_v=res["curve"]["eps_v"])
+        err = compare(fig, hfig)
+        return first_run_decides({k: err["err_" + k] for k in TOLERANCES}, len(seeds),
+                                 base.n)
+
     def evaluate(points, stage):
-        got = run_sets(points, stage, seeds)
+        # every set on its first seed; the rest of the seeds only where that run leaves the
+        # set's mean undecided
+        if not o.decide_on_first_run:
+            got = run_sets(points, stage, seeds)    # one batch: every run at once
+        else:
+            got = run_sets(points, stage, seeds[:1])
+        decided = {i: first_run(got[(i, seeds[0])]) for i in range(len(points))}
+        rest = [i for i in range(len(points)) if not decided[i]]
+        if len(seeds) > 1 and rest:
+            got.update(run_sets(points, stage, seeds[1:], which=set(rest)))
         out = []
         for i, v in enumerate(points):
-            rec = _combine([got[(i, s)] for s in seeds], seeds, smooth, post_peak_strain, hfig)
-            rec.update(index=len(records), stage=stage, values=list(v))
+            used = seeds[:1] if decided[i] else seeds
+            rec = _combine([got[(i, s)] for s in used], used, smooth, post_peak_strain, hfig)
+            rec.update(index=len(records), stage=stage, values=list(v), decided_by=decided[i])
+            assert not (decided[i] and rec["met"])    # a decided figure misses its tolerance
             records.append(rec)
             out.append(rec)
-            _say(verbose, f"[calibrate] set {rec['index']} ({stage}), mean of seeds "
-                          f"{','.join(map(str, seeds))}: {_fmt_figs(rec)}; score "
-                          f"{rec['score']:.3g}{'; MEETS ALL TARGETS' if rec['met'] else ''}")
+            how = (f"seed {seeds[0]} alone (it decides {', '.join(decided[i])} missed by the "
+                   f"mean of {len(seeds)})" if decided[i] else
+                   f"mean of seeds {','.join(map(str, seeds))}")
+            _say(verbose, f"[calibrate] set {rec['index']} ({stage}), {how}: {_fmt_figs(rec)}; "
+                          f"score {rec['score']:.3g}"
+                          f"{'; MEETS ALL TARGETS' if rec['met'] else ''}")
         _write_csv(out_dir, space, records, hfig)
         if where is not None and not where.written:
             where.wrote("evaluations.jsonl (every finished run)", "calibration.csv")
@@ -200,6 +233,15 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         start = tuple(getattr(base, f) for f in space.names)
         best, seen, trace, why, info = surrogate_search(
             space, evaluate, hfig, start=start, initial=initial, max_evals=max_evals, batch=batch)
+        if best["decided_by"]:
+            # the search ended without a met set and its best was run on one seed: its figures
+            # are its seeds' mean like every reported set's (and the check's reference)
+            got = run_sets([tuple(best["values"])], "best", seeds)
+            full = _combine([got[(0, s)] for s in seeds], seeds, smooth, post_peak_strain, hfig)
+            full.update(index=best["index"], stage=best["stage"], values=best["values"],
+                        decided_by=[], completed=True)
+            records[best["index"]] = full
+            best = full
         check = []
         check_mean = None
         if check_seeds:
@@ -257,7 +299,12 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     summary = {"target": target, "target_figures": hfig, "tolerances": TOLERANCES,
                "peak_fraction": PEAK_FRACTION, "options": header, "regime": regime,
                "stopped": why,
-               "evaluations": len(records), "runs": len(records) * len(seeds) + len(check),
+               "evaluations": len(records),
+               "runs": sum(len(r["seeds"]) for r in records) + len(check),
+               "seed_rule": {"decide_on_first_run": o.decide_on_first_run, "z": DECIDE_Z,
+                             "one_run_scatter": one_run_scatter(base.n),
+                             "sets_on_first_run": sum(bool(r["decided_by"]) for r in records),
+                             "runs_saved": sum(len(seeds) - len(r["seeds"]) for r in records)},
                "run_now": counts["run"], "taken_from_checkpoint": counts["taken"],
                "trace": trace, "met": best["met"], "verdict": verdict,
                "best": {k: best[k] for k in ["index", "stage", "values", "score", "met",

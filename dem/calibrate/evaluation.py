@@ -118,7 +118,7 @@ def _sample_scatter(per, n_fit, n_check):
 
 def _combine(runs, seeds, smooth, post_peak_strain, hfig):
     """The record of one parameter set from its runs (one per seed): the figures are the means
-    over the seeds, spread_X = (max - min) / mean of figure X over them."""
+    over the seeds, spread_X = (max - min) / mean of figure X over them (None for one run)."""
     per = []
     for s, res in zip(seeds, runs):
         fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
@@ -129,7 +129,7 @@ def _combine(runs, seeds, smooth, post_peak_strain, hfig):
     rec = _mean_figures(per, hfig)
     for k in TOLERANCES:
         v = [p[k] for p in per]
-        rec["spread_" + k] = float((max(v) - min(v)) / np.mean(v))
+        rec["spread_" + k] = float((max(v) - min(v)) / np.mean(v)) if len(v) > 1 else None
     por = [p["porosity"] for p in per if p["porosity"] is not None]
     rec.update(past_peak=all(p["past_peak"] for p in per),
                porosity=float(np.mean(por)) if por else None,

@@ -84,6 +84,8 @@ class CalibrationOptions:
     eps_max: float = 0.035             # each test ends at this axial strain at most [-]
     post_peak_strain: float = 0.01     # ... or this far past its peak [-]
     smooth: float = 0.001              # strain window of q's moving average for the peak [-]
+    decide_on_first_run: bool = True   # a set whose first run decides it missed runs on no
+                                       # other seed (first_run_decides); False: every seed
 
     @staticmethod
     def allowed_text(field) -> str:

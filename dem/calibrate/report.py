@@ -16,14 +16,19 @@ from .targets import FIGURE_TEXT, TOLERANCES, _fmt_figs, _fmt_values
 FIGURE_COLS = (list(TOLERANCES) + ["err_" + k for k in TOLERANCES]
                + ["met_" + k for k in TOLERANCES] + ["met", "score"])
 CSV_FIXED = FIGURE_COLS + ["eps1_peak", "past_peak", "peak_q_raw"] + [
-    "spread_" + k for k in TOLERANCES] + ["porosity", "steps", "wall_time"]
+    "spread_" + k for k in TOLERANCES] + ["porosity", "steps", "wall_time", "runs",
+                                          "decided_by"]
 RUN_FIXED = list(TOLERANCES) + ["eps1_peak", "past_peak", "peak_q_raw", "porosity", "steps",
                                 "wall_time"]
 
 
 def _spread(records):
-    """The seeds' spread of each figure over all sets: mean and largest (max - min) / mean."""
+    """The seeds' spread of each figure over the sets run on more than one seed: mean and
+    largest (max - min) / mean."""
     out = {}
+    records = [r for r in records if len(r["seeds"]) > 1]
+    if not records:
+        return {}
     for k in TOLERANCES:
         v = [r["spread_" + k] for r in records]
         out[k] = {"mean": float(np.mean(v)), "max": float(np.max(v)), "tolerance": TOLERANCES[k]}
@@ -42,9 +47,11 @@ def _write_csv(out_dir, space, records, hfig):
                                                                 ("spread", 0.0))}}
     rows = [["hmodel", "", "target"] + [""] * len(space.names)
             + [_cell(target.get(c)) for c in CSV_FIXED]]
+    target.update(runs="", decided_by="")
     for r in sorted(records, key=lambda r: r["index"]):
+        more = {"runs": len(r["seeds"]), "decided_by": "+".join(r.get("decided_by") or [])}
         rows.append(["dem", r["index"], r["stage"]] + list(r["values"])
-                    + [_cell(r[c]) for c in CSV_FIXED])
+                    + [_cell(more[c] if c in more else r[c]) for c in CSV_FIXED])
     io.write_csv(os.path.join(out_dir, "calibration.csv"), cols, rows)
 
 
@@ -181,8 +188,29 @@ def _report(out_dir, s, space, records):
           "Dots: the sets evaluated (mean of the seeds; filled: all targets met); line: the "
           "model's least predicted score over the other parameters.", "",
           "![score](calibration_score.png)", "", "![search](calibration_search.png)", "",
-          "## The seeds' spread", "",
-          "(max - min) / mean of each figure over the seeds of a set, over all sets:", "",
+          "## The runs each set cost", ""]
+    sr = s.get("seed_rule")
+    if sr is not None:
+        n_seeds = len(s["options"]["seeds"])
+        first = [r for r in records if r.get("decided_by")]
+        if not sr["decide_on_first_run"]:
+            L.append(f"Every set on all {n_seeds} seeds (--no-first-run-decision).")
+        else:
+            sig = ", ".join(f"{FIGURE_TEXT[k]} {v:.1%}" for k, v in sr["one_run_scatter"].items())
+            L += [f"Every set on its first seed, then on the other {n_seeds - 1} only where that "
+                  f"run leaves the mean over the {n_seeds} seeds undecided: a figure is decided "
+                  f"missed on one run where its error exceeds its tolerance by {sr['z']:g} "
+                  f"predictive standard deviations of the {n_seeds}-seed mean (a run's scatter "
+                  f"at n = {s['options']['n']}: {sig}; docs/dem.md). {len(first)} of "
+                  f"{len(records)} sets were decided on one run, {sr['runs_saved']} runs "
+                  "saved:", "", "| set | stage | runs | decided missed on its first run |",
+                  "|---|---|---|---|"]
+            L += [f"| {r['index']} | {r['stage']} | {len(r['seeds'])} | "
+                  f"{', '.join(FIGURE_TEXT[k] for k in r.get('decided_by') or []) or '-'} |"
+                  for r in sorted(records, key=lambda r: r["index"])]
+    L += ["", "## The seeds' spread", "",
+          "(max - min) / mean of each figure over the seeds of a set, over the sets run on more "
+          "than one seed:", "",
           "| figure | mean | largest | tolerance |", "|---|---|---|---|"]
     for k, v in s["seeds_spread"].items():
         L.append(f"| {FIGURE_TEXT[k]} | {v['mean']:.1%} | {v['max']:.1%} | {v['tolerance']:.0%} |")

@@ -18,6 +18,47 @@ SECANT_STRAIN = 0.0025
 TARGETS = ("hmodel",)
 
 
+# -- a set decided on its first run ---------------------------------------------------------------
+# One 2000-disk run's scatter about its set's mean: the relative standard deviation (sd / mean,
+# ddof 1) of each figure over 16 seeds of the calibrated set (the calibration gallery's
+# sample_scatter.csv: peak q 4.87 %, eps1_95 48.2 %, secant 3.24 %, dilatancy ratio 3.08 %).
+ONE_RUN_SCATTER = {"peak_q": 0.0487, "eps1_95": 0.482, "secant": 0.0324, "dilatancy": 0.0308}
+SCATTER_DISKS = 2000     # the sample size it was measured at
+DECIDE_Z = 3.0           # a first run decides beyond this many predictive standard deviations
+
+
+def one_run_scatter(n_disks: int) -> dict:
+    """A run's relative scatter of each figure for a sample of ``n_disks``: the measured
+    ``ONE_RUN_SCATTER`` at 2000 disks, scaled as the mean over the sample's grains,
+    sqrt(2000 / n), for a smaller sample, and never below the 2000-disk figure for a larger one
+    (no measurement says it shrinks so: the rule stays on the side of running the seeds)."""
+    f = math.sqrt(max(SCATTER_DISKS / float(n_disks), 1.0))
+    return {k: v * f for k, v in ONE_RUN_SCATTER.items()}
+
+
+def first_run_decides(err: dict, n_seeds: int, n_disks: int) -> list:
+    """The figures a set's first run alone decides as missed by the mean over its ``n_seeds``
+    seeds (the set's figures by definition), from that run's relative errors ``err``
+    ({figure: fig/target - 1}, ``compare``'s err_X): those with
+
+        |err| > tol + DECIDE_Z * sigma * (1 + max(err, 0)) * sqrt((n_seeds - 1) / n_seeds),
+
+    sigma the run's relative scatter (``one_run_scatter``). Why: given one run x1 of a set whose
+    mean mu is unknown (flat prior), mu ~ N(x1, s^2) and the mean of the other n - 1 runs ~
+    N(mu, s^2 / (n - 1)), so the n-seed mean ~ N(x1, s^2 (n - 1) / n): beyond the bound the
+    n-seed mean meets the figure's tolerance with probability below Phi(-3) = 0.13 %. (And a set
+    whose own mean lies within the tolerance has its first run beyond the bound with probability
+    at most Phi(-3 sqrt((n - 1) / n)): 0.47 % at four seeds.) s = sigma x1 / target: the scatter
+    is relative to the set's own figure, (1 + err) of the target's, counted where err > 0.
+    [] for one seed (nothing to save) or where no figure is decided."""
+    if n_seeds < 2:
+        return []
+    sig = one_run_scatter(n_disks)
+    shrink = math.sqrt((n_seeds - 1) / n_seeds)
+    return [k for k, tol in TOLERANCES.items()
+            if abs(err[k]) > tol + DECIDE_Z * sig[k] * (1.0 + max(err[k], 0.0)) * shrink]
+
+
 # -- the four figures of a curve -----------------------------------------------------------------
 def smoothed(eps1, q, window):
     """q averaged over eps1 in [e - window/2, e + window/2] at every point (window 0: q)."""

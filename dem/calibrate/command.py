@@ -106,7 +106,9 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                   f"{hfig['secant'] / 1e6:.1f} MPa, dilatancy ratio 1 - d eps_v/d eps1 over "
                   f"{100 * DILATANCY_STRAIN:g} % after it = {hfig['dilatancy']:.3f} "
                   f"({time.time() - th:.1f} s); every set on "
-                  f"seeds {','.join(map(str, seeds))}")
+                  + (f"seed {seeds[0]}, and on seeds {','.join(map(str, seeds[1:]))} unless that "
+                     "run decides it missed" if o.decide_on_first_run and len(seeds) > 1 else
+                     f"seeds {','.join(map(str, seeds))}"))
     # -- from here on, files are written
     from .. import io
     os.makedirs(out_dir, exist_ok=True)

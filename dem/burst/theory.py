@@ -11,16 +11,20 @@ import numpy as np
 
 CLEARLY = 2.0      # k_path is clearly positive above this many times its noise
 AVALANCHE = 1.0    # a probe set off an avalanche where k_path < -AVALANCHE x the largest k_path
+                   # (and a relaxation collapsed where |c change| > AVALANCHE x k_max x d_eps1)
 
 
 class Noise(NamedTuple):
     """k_path's noise about its sign [Pa] (``k_noise``), and what is measured beside it."""
     noise: float           # the larger of ``relax`` and ``repeat`` (NaN where neither can be had)
-    relax: float           # the relaxations': sqrt 2 x RMS(c_before - c_state) / d eps1
+    relax: float           # the relaxations': sqrt 2 x RMS(c_before - c_state) / d eps1, over
+                           # those that did not collapse
     repeat: float          # the repeats' whose two k_path differ in sign, neither an avalanche
     same_sign: float       # the repeats of one sign: RMS difference / sqrt 2 (not noise)
     avalanches: tuple      # (key, k_path) of the probes that set off an avalanche (not noise)
     k_max: float           # the largest k_path of the path: the stiffest response measured
+    relax_collapses: tuple = ()  # (key, c_before - c_state [Pa]) of the relaxations that
+                                 # collapsed (not noise)
 
 
 def k_noise(probes, d_eps1, repeats=()) -> Noise:
@@ -36,16 +40,22 @@ def k_noise(probes, d_eps1, repeats=()) -> Noise:
     response, not noise about its sign: they are measured apart (``Noise.same_sign``,
     ``Noise.avalanches``). An avalanche: a probe whose c fell by more than the stiffest response
     of the path (its largest k_path, ``Noise.k_max``) raises c over the same move, k_path <
-    -``AVALANCHE`` k_max: the move set off a collapse. Measured: a repeat whose probe set off an
+    -``AVALANCHE`` k_max: the move set off a collapse. So too a relaxation: a dead-load
+    equilibrium whose c moved, its strain held, by more than the stiffest response moves it over
+    the probe's whole move, |c_before - c_state| > ``AVALANCHE`` k_max d_eps1, slid on its own
+    (``Noise.relax_collapses``), and its change is not counted in the relaxations' noise. Measured: a repeat whose probe set off an
     avalanche (c fell 22.9 kPa for d eps1 = 1e-5: -2.29e9 Pa against -2.06e8 Pa at the same
     state) made the former estimate (every pair) 1.04e9 Pa, 250 times the relaxations' 4.2e6 Pa,
     and nothing of the staircase clearly positive; the 2000-disk gallery's two pairs (+6.5e7 and
     +2.6e7, -5.0e7 and -5.9e7 Pa) are of one sign each."""
-    dz = [p.c_before - p.c_state for p in probes if p.key.startswith("h")]
-    relax_noise = (math.sqrt(2.0) * math.sqrt(float(np.mean(np.square(dz)))) / d_eps1
-                   if dz else math.nan)
     ks = [p.k_path for p in probes if math.isfinite(p.k_path)]
     k_max = max(ks) if ks else math.nan
+    dz = [(p.key, p.c_before - p.c_state) for p in probes if p.key.startswith("h")]
+    collapsed = lambda z: bool(k_max > 0 and abs(z) > AVALANCHE * k_max * d_eps1)
+    collapses = tuple((k, float(z)) for k, z in dz if collapsed(z))
+    dz = [z for _, z in dz if not collapsed(z)]
+    relax_noise = (math.sqrt(2.0) * math.sqrt(float(np.mean(np.square(dz)))) / d_eps1
+                   if dz else math.nan)
     aval = lambda p: bool(k_max > 0 and p.k_path < -AVALANCHE * k_max)
     avalanches = tuple((p.key, float(p.k_path)) for p in probes if aval(p))
     rms = lambda d: math.sqrt(float(np.mean(np.square(d))) / 2.0) if d else math.nan
@@ -55,7 +65,7 @@ def k_noise(probes, d_eps1, repeats=()) -> Noise:
     repeat_noise = rms(opposite)
     both = [x for x in (relax_noise, repeat_noise) if math.isfinite(x)]
     return Noise(max(both) if both else math.nan, relax_noise, repeat_noise, rms(same),
-                 avalanches, k_max)
+                 avalanches, k_max, collapses)
 
 
 def theory_verdict(eqs, fails, noise, dc) -> dict:
@@ -158,7 +168,7 @@ def staircase_verdict(eq, holds, probes, dc, d_eps1, end="past found") -> dict:
     is the state "hk_end"); ``probes`` {key: ProbeResult}; ``dc``, ``d_eps1`` the options';
     ``end`` how the rest search ended. Returns ``theory_verdict``'s dict with the noise's
     estimates (``k_noise_relax``, ``k_noise_repeat``, ``k_repeat_same_sign``, ``avalanches``,
-    ``k_max``)."""
+    ``relax_collapses``, ``k_max``)."""
     repeats = [(probes[h[4]], probes[f"h{i}_end"]) for i, h in enumerate(holds)
                if h[0].startswith("baseline_") and h[4] in probes and f"h{i}_end" in probes]
     n = k_noise(list(probes.values()), d_eps1, repeats)
@@ -171,6 +181,7 @@ def staircase_verdict(eq, holds, probes, dc, d_eps1, end="past found") -> dict:
     verdict.update(k_noise_relax=n.relax, k_noise_repeat=n.repeat,
                    k_repeat_same_sign=n.same_sign,
                    avalanches=[{"key": a, "k_path": kp} for a, kp in n.avalanches],
+                   relax_collapses=[{"key": a, "dc": z} for a, z in n.relax_collapses],
                    k_max=n.k_max, probe_d_eps1=d_eps1)
     return verdict
 

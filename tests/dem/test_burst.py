@@ -334,3 +334,39 @@ def test_an_avalanche_set_off_by_a_probe_cannot_make_the_verdict_pass():
     assert v["c_cross"] == pytest.approx(66e3 + 2e3 * 2.5e7 / (2.5e7 + 2.06e8), rel=1e-12)
     # and it can fail: the hold of +dc failing one equilibrium earlier contradicts it
     assert theory_verdict(eqs, [("e3", 100.0)], n.noise, 100.0)["verdict"] == "contradicted"
+
+
+def test_a_relaxation_that_collapsed_cannot_inflate_the_noise():
+    """The relaxation of a dead-load equilibrium at fixed strain that collapsed (2000 disks,
+    seed 2: c from 93.55 to 81.74 kPa with the walls still, where the path's stiffest response,
+    k_max = 2.11e8 Pa, moves c by 2.1 kPa over the probe's d eps1 = 1e-5) is the state sliding on
+    its own, not noise about k_path's sign: counted, it made the relaxations' noise 3.65e8 Pa
+    and nothing clearly positive (no verdict); left out (measured apart, ``relax_collapses``),
+    the noise is the others' and the verdict is drawn, and can fail. A relaxation just inside
+    the bound still counts."""
+    from dem.burst import ProbeResult, k_noise, theory_verdict
+    d = 1e-5
+    p = lambda key, dz, k: ProbeResult(key, 0.0, dz, 0.0, 0.0, d, k, 0.0, "equilibrium", 1, 0.0)
+    ks = [1.46e8, 9.7e7, 5.7e7, 3.1e7, 2.2e7, -5.5e8]
+    small = [52.0, -61.0, 37.0, -25.0, 8.0]
+    probes = ([p("relaxed_start", 5.5, ks[0]), p("relaxed_peak", -0.2, 2.11e8)]
+              + [p(f"h{i}_end", z, k) for i, (z, k) in enumerate(zip(small, ks[1:]))]
+              + [p("h12_end", -11813.0, 1.74e8)])
+    eqs = _eqs(ks)
+    counted = math.sqrt(2) * math.sqrt(np.mean(np.square(small + [-11813.0]))) / d
+    # sqrt(2) x 11813 / sqrt(6) / 1e-5 to 0.1 %: the collapse is the whole of it (the run's
+    # 3.65e8 Pa over its 17 relaxations)
+    assert counted == pytest.approx(math.sqrt(2) * 11813.0 / math.sqrt(6) / d, rel=1e-3)
+    assert theory_verdict(eqs, [("e5", 100.0)], counted, 100.0)["verdict"] == "no verdict"
+    n = k_noise(probes, d)
+    assert n.k_max == 2.11e8 and n.relax_collapses == (("h12_end", -11813.0),)
+    assert n.relax == pytest.approx(math.sqrt(2) * math.sqrt(np.mean(np.square(small))) / d,
+                                    rel=1e-12) and n.noise == n.relax
+    v = theory_verdict(eqs, [("e5", 100.0)], n.noise, 100.0)
+    assert v["verdict"] == "passes"
+    assert theory_verdict(eqs, [("e3", 100.0)], n.noise, 100.0)["verdict"] == "contradicted"
+    # the bound: |dz| > k_max d_eps1 (2110 Pa here); just inside it, a relaxation is noise
+    inside = probes[:-1] + [p("h12_end", -2109.0, 1.74e8)]
+    assert k_noise(inside, d).relax_collapses == ()
+    outside = probes[:-1] + [p("h12_end", -2111.0, 1.74e8)]
+    assert k_noise(outside, d).relax_collapses == (("h12_end", -2111.0),)

@@ -135,8 +135,10 @@ def without_collapses(folder, v):
     dead-load equilibrium whose relaxation at fixed strain moved c by more than the path's
     stiffest response moves it over the probe's whole d eps1 (|c_before - c_state| > k_max
     d_eps1: the state slid with its walls still, as an avalanche of a probe) is its own
-    response, not noise about k_path's sign. A sensitivity, not the package's rule
-    (``dem.burst.k_noise``). Returns (collapsed keys, the noise, theory_verdict's dict)."""
+    response, not noise about k_path's sign. Written before the package's rule
+    (``dem.burst.k_noise``) left such relaxations out too; it gives the same verdict now, and
+    stays as the check of that rule on every folder. Returns (collapsed keys, the noise,
+    theory_verdict's dict)."""
     from dem.burst import theory_verdict
     s, stairs, probes, rest = _read(folder)
     d = s["options"]["probe_d_eps1"]

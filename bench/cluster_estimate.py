@@ -14,6 +14,20 @@ probes in one go: a run completed by `--resume` measured only what was left.
     python bench/cluster_estimate.py DIR                 # DIR: a `crosscheck` output folder
     python bench/cluster_estimate.py DIR --workers 2,8,16,45 --measured-workers 2
     python bench/cluster_estimate.py DIR2 --seconds 6000 # DIR2: a `dem domain` output folder
+    python bench/cluster_estimate.py DIR3 --workers 1,2,8 [--rate 4400]   # DIR3: a `dem burst` folder
+
+A `dem burst` folder (its stairs.csv) is replayed as `run_burst` hands its runs out
+(`dem.burst.pool`): the paths first (one task each), then each staircase's chain (the start's
+relaxation and the holds of the staircase, one after another, always on a worker of their own),
+and beside it, on the workers the chains leave, the runs as their states come: the loaded peak's
+relaxation from the start, the probe of each equilibrium when its hold or relaxation ends, the
+below run and the baselines when the staircase ends and the probes of their ends after them; the
+runs that start others before the probes, then first asked, first run. Every run's length is its
+step count (rest.csv, stairs.csv, probes.csv, summary.json's paths) at one rate, ``--rate``
+steps a second a worker (default: the run's own probes', probes.csv's steps over wall_time); one
+worker runs everything one after another. The figures are those of the files' runs (a run's
+steps do not depend on the workers), a worker as fast as the rate says, dask's overhead (seconds
+a task) left out.
 """
 from __future__ import annotations
 
@@ -27,20 +41,145 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from dem.domain import makespan, stage_steps     # noqa: E402
 
 
+def _csv(path):
+    import csv
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def burst_runs(bdir):
+    """The runs of a finished `dem burst` folder, one dict a path (in summary.json's order):
+    ``path`` (its steps), ``chain`` ([(name, steps)]: the start's relaxation, then the
+    staircase's holds, and the loaded peak's relaxation where the path has no loaded peak),
+    ``peak`` (the loaded peak's relaxation beside the staircase: its steps, or None), ``holds``
+    ({k: (role, outcome, steps)}), ``probes`` ({key: steps})."""
+    with open(os.path.join(bdir, "summary.json")) as f:
+        summ = json.load(f)
+    rest, stairs, probes = (_csv(os.path.join(bdir, n)) for n in ("rest.csv", "stairs.csv",
+                                                                  "probes.csv"))
+    out = []
+    for p in summ["paths"]:
+        mine = lambda rows: [x for x in rows if float(x["ratio"]) == p["ratio"]
+                             and float(x["start_fraction"]) == p["start_fraction"]]
+        relax = {x["state"]: int(float(x["steps"])) for x in mine(rest)}
+        holds = {int(x["hold"]): (x["role"], x["outcome"], int(float(x["steps"])))
+                 for x in mine(stairs)}
+        stair = [(f"h{k}", holds[k][2]) for k in sorted(holds) if holds[k][0] == "stair"]
+        peaked = p["end"] in ("drop", "strain")
+        chain = ([("relax_start", relax["start"])] if "start" in relax else []) + stair
+        if not peaked and "peak" in relax:
+            chain.append(("relax_peak", relax["peak"]))
+        out.append({"path": p["steps"], "chain": chain,
+                    "peak": relax.get("peak") if peaked else None, "holds": holds,
+                    "probes": {x["key"]: int(float(x["steps"])) for x in mine(probes)}})
+    return out
+
+
+def replay_burst(runs, workers):
+    """The wall time of ``burst_runs``'s runs on ``workers`` workers, in steps of one worker, as
+    ``run_burst`` hands them out (the module doc): (paths, rest searches) ."""
+    import heapq
+    paths = makespan([r["path"] for r in runs], workers)
+    if workers == 1:
+        return paths, float(sum(sum(s for _, s in r["chain"]) + (r["peak"] or 0)
+                                + sum(h[2] for k, h in r["holds"].items() if h[0] != "stair")
+                                + sum(r["probes"].values()) for r in runs))
+    t, seq = 0.0, [0]
+    queue, running = [], []          # (rank, order, (path, name, steps)); (end, order, ...)
+    chains = {}                      # path -> index of its running chain run
+
+    def ask(i, name, steps, first=False):
+        seq[0] += 1
+        heapq.heappush(queue, (0 if first else 1, seq[0], (i, name, steps)))
+
+    def probe(i, key):
+        if key in runs[i]["probes"]:
+            ask(i, "probe " + key, runs[i]["probes"][key])
+
+    def run(i, name, steps, chain):
+        seq[0] += 1
+        heapq.heappush(running, (t + steps, seq[0], (i, name, chain)))
+
+    def next_chain(i):
+        r, k = runs[i], chains.get(i, -1) + 1
+        if k < len(r["chain"]):
+            chains[i] = k
+            run(i, r["chain"][k][0], r["chain"][k][1], True)
+            return
+        chains.pop(i, None)
+        for k, (role, _, steps) in sorted(r["holds"].items()):
+            if role != "stair":
+                ask(i, f"h{k}", steps, first=True)
+
+    for i, r in enumerate(runs):
+        if r["peak"] is not None:
+            ask(i, "relax_peak", r["peak"], first=True)
+        next_chain(i)
+
+    def fill():
+        busy = len(running) - len(chains)
+        while queue and busy < workers - len(chains):
+            _, _, (i, name, steps) = heapq.heappop(queue)
+            run(i, name, steps, False)
+            busy += 1
+
+    fill()
+    while running:
+        t, _, (i, name, chain) = heapq.heappop(running)
+        if name.startswith("relax_"):
+            probe(i, "relaxed_" + name[len("relax_"):])
+        elif name.startswith("h") and runs[i]["holds"][int(name[1:])][1] == "equilibrium":
+            probe(i, name + "_end")
+        if chain:
+            next_chain(i)
+        fill()
+    return paths, t
+
+
+def main_burst(a, counts):
+    runs = burst_runs(a.dir)
+    steps = sum(sum(r["probes"].values()) for r in runs)
+    if a.rate is None:
+        wall = sum(float(x["wall_time"]) for x in _csv(os.path.join(a.dir, "probes.csv")))
+        if not steps or not wall:
+            sys.exit("no probes to take the rate from: give --rate")
+        a.rate = steps / wall
+    chain = sum(sum(s for _, s in r["chain"]) for r in runs)
+    total = sum(replay_burst(runs, 1))
+    print(f"{a.dir}: {len(runs)} path(s), {total / 1e6:.2f} million steps of runs (the paths "
+          f"{sum(r['path'] for r in runs) / 1e6:.2f}, the staircases' chains {chain / 1e6:.2f}, "
+          f"the probes {steps / 1e6:.2f}); {a.rate:.0f} steps/s a worker")
+    print(f"{'workers':>8} {'paths':>8} {'rest':>8} {'total':>8}   (minutes)   of one worker")
+    for n in counts:
+        p, s = replay_burst(runs, n)
+        print(f"{n:>8} {p / a.rate / 60:>8.1f} {s / a.rate / 60:>8.1f} {(p + s) / a.rate / 60:>8.1f}"
+              f"   {(p + s) / total:>22.3f}")
+    floor = max(r["path"] + sum(s for _, s in r["chain"]) + max(
+        [h[2] + r["probes"].get(f"h{k}_end", 0) for k, h in r["holds"].items()
+         if h[0] != "stair"] + [0]) for r in runs)
+    print(f"floor (a path, its staircase, then its longest hold beside it and that hold's probe):"
+          f" {floor / a.rate / 60:.1f} min, {floor / total:.3f} of one worker")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter, allow_abbrev=False)
-    ap.add_argument("dir", help="a crosscheck output folder (or a dem domain folder with --seconds)")
+    ap.add_argument("dir", help="a crosscheck output folder (or a dem domain folder with --seconds, "
+                                "or a dem burst folder)")
     ap.add_argument("--workers", default="1,2,4,8,16,32,64", help="worker counts to estimate")
     ap.add_argument("--measured-workers", type=int, default=2,
                     help="workers the run had (default 2: this 2-core machine)")
     ap.add_argument("--seconds", type=float, default=None,
                     help="measured wall time of the relaxations and probes [s] (default: from "
                          "DIR/conclusions.json)")
+    ap.add_argument("--rate", type=float, default=None,
+                    help="a dem burst folder: steps a second of one worker (default: its probes')")
     a = ap.parse_args(argv)
     counts = [int(w) for w in a.workers.split(",")]
     if a.measured_workers < 1 or min(counts) < 1:
         ap.error("--workers and --measured-workers: allowed integers >= 1")
+    if os.path.exists(os.path.join(a.dir, "stairs.csv")):
+        return main_burst(a, counts)
     ddir = os.path.join(a.dir, "dem", "domain")
     fixed, seconds = {}, a.seconds
     if os.path.isdir(ddir):

@@ -433,10 +433,13 @@ def build_parser() -> opt.Parser:
     add(g, "--fail-strain", 0.01, record=BO)
     _equilibrium_options(u, BO)
     g = u.add_argument_group("the run")
-    add(g, "--resume", note="the paths, relaxations and holds in --out (burst_runs.jsonl, rest/)")
+    add(g, "--resume", note="the paths, relaxations, holds and probes in --out "
+        "(burst_runs.jsonl, rest/)")
     add(g, "--scheduler", default_text="none (local processes)")
-    add(g, "--workers", default_text="the cores", note="the paths, then each path's rest search "
-        "and its runs; one thread each")
+    add(g, "--workers", default_text="the cores", note="the paths, then every run of the rest "
+        "searches: each staircase's holds one after another, its probes, below run and "
+        "baselines beside it on the other workers as their states come; one thread each "
+        "(the staircase of a single path on --threads)")
     add(g, "--threads", default_text="auto (common.threads)", note="of a run alone in the process")
     add(g, "--params", metavar="FILE", note="refused unless it is the states' own",
         default_text="the states'")

@@ -51,9 +51,10 @@ closed to round-off (``w2_ext``, ``w2_int``, ``u0``, ``eq1_bookkeeping``).
 
 Modules: ``options`` (``BurstOptions`` and the peak rule), ``runs`` (the path, the relaxation at
 fixed strain, the kinematic probe of the path, the held run), ``stairs`` (the staircase: the c
-peak at rest, the below and past runs), ``journal`` (a staircase's journal and the command's
-checkpoint), ``theory`` (k_path's noise and the theory's verdict), ``report`` (the rows and
-files), ``figures``, ``command`` (``check_sample_size``, ``load_starts``, ``run_burst``).
+peak at rest, the below and past runs), ``pool`` (the runs of the staircases in this process or
+over workers: the probes beside the staircase), ``journal`` (a staircase's journal and the
+command's checkpoint), ``theory`` (k_path's noise and the theory's verdict), ``report`` (the rows
+and files), ``figures``, ``command`` (``check_sample_size``, ``load_starts``, ``run_burst``).
 """
 from .options import BurstOptions, HOLDS, SWITCHES, below_row, confirm_peak, scan_peak
 from .runs import (H, HISTORY_COLUMNS, HOLD_ANATOMY_COLUMNS, HOLD_LEDGER_COLUMNS, HoldResult, ONSET,

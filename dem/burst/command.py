@@ -1,6 +1,6 @@
 """The burst's command (``dem.burst``, ``python -m dem burst``): the start states
-(``load_starts``; their disk count read first, ``check_sample_size``), every path then every
-path's staircase spread over processes or a dask cluster (``run_burst``), the checkpoint and
+(``load_starts``; their disk count read first, ``check_sample_size``), every path then the runs
+of every path's staircase spread over processes or a dask cluster (``run_burst``), the checkpoint and
 journals of a resume, the files, the figures and the anatomy of the switches' runs."""
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from .journal import _Journal, checkpoint_header, read_checkpoint
 from .options import SWITCHES, BurstOptions
 from .report import burst_row, write_burst_files
 from .runs import PathResult, proportional_path
-from .stairs import staircase
+from .stairs import staircase_runs
 
 
 # ----------------------------------------------------------------------------------------------
@@ -93,10 +93,12 @@ def _path_task(args):
     return proportional_path(state, ratio, opts, threads, progress)
 
 
-def _stairs_task(args):
-    path, ratio, fraction, opts, threads, verbose, base, resume = args
+def _stairs_job(path, ratio, fraction, opts, verbose, base, resume):
+    """(tag, make) of one path's staircase for ``dem.burst.pool``: ``make(tasks)`` opens its
+    journal and gives the generator of its runs (``staircase_runs``)."""
     log = (lambda m: _log(f"R={ratio:g} f={fraction:g} {m}")) if verbose else None
-    return staircase(path, ratio, opts, threads, log, _Journal(base, resume))
+    return ((ratio, fraction),
+            lambda tasks: staircase_runs(path, ratio, opts, log, _Journal(base, resume), tasks))
 
 
 def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = BurstOptions(),
@@ -104,11 +106,16 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
               resume=False, scheduler=None, allow_soft=False):
     """Every proportional path (one per ratio and start fraction), then the rest search of every
     path (``staircase``: its start relaxed at fixed strain, then G held by steps from rest until
-    a hold of +dc fails; the below and past runs), each path's task an independent run spread
-    over ``workers`` local processes or a dask cluster at ``scheduler`` (one thread each;
-    ``threads`` in a single process). Every finished path goes to ``out_dir``/burst_runs.jsonl
-    and every relaxation and hold of a staircase to its journal in ``out_dir``/rest/, so that
-    ``resume`` continues from them (refusing a folder of other states or options). Writes
+    a hold of +dc fails; the below and past runs, the kinematic probes), spread over
+    ``workers`` local processes or a dask cluster at ``scheduler`` (one thread each; ``threads``
+    in a single process): each path's task an independent run, then every run of the rest
+    searches a task (``dem.burst.pool``: the holds of each staircase one after another, its
+    probes, the loaded peak's relaxation, the below run and the baselines on the other workers
+    as soon as their states exist; the files the same bytes as on one worker, which runs them
+    in this process one after another, the probes after the staircase). Every finished path
+    goes to ``out_dir``/burst_runs.jsonl and every relaxation, hold and probe of a staircase to
+    its journal in ``out_dir``/rest/ as it finishes, so that ``resume`` continues from them
+    (refusing a folder of other states or options). Writes
     ``out_dir``/burst.csv, history.csv, paths.csv, rest.csv, stairs.csv, summary.json,
     params.json, the states the switches started from (rest/) and the figures. Returns (burst
     rows as dicts, summary dict). States of parameters outside the granular regime at the test's
@@ -182,17 +189,29 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
          got_path, workers, scheduler, fn=_path_task)
     if stage:
         stage.at("dem burst: the rest search (from rest, G held by steps)")
-    tasks = [((r, f), (paths[(r, f)], r, f, opts, None, verbose,
-                       os.path.join(out_dir, "rest", _base(r, f)), resume))
-             for r, f, _ in combos if paths[(r, f)].confirmed_by != "unloaded"]
-    tasks = [(k, a[:4] + (per_run(tasks),) + a[5:]) for k, a in tasks]
+    jobs = [_stairs_job(paths[(r, f)], r, f, opts, verbose,
+                        os.path.join(out_dir, "rest", _base(r, f)), resume)
+            for r, f, _ in combos if paths[(r, f)].confirmed_by != "unloaded"]
 
     def got_stairs(key, res):
         stairs[key] = res
         log(f"R={key[0]:g} f={key[1]:g}: {res.end}, {len(res.holds)} holds, "
             f"{res.wall_time:.0f} s")
 
-    _map(tasks, got_stairs, workers, scheduler, fn=_stairs_task)
+    # one worker: each staircase here, its runs one after another (its probes at its end); more:
+    # every run of every staircase a task of the pool, the probes, the below run and the
+    # baselines beside the staircases (``dem.burst.pool``)
+    if scheduler or (workers or os.cpu_count() or 1) > 1:
+        from .pool import run_pool
+        chain = threads if threads is not None else (None if len(jobs) == 1 and not scheduler
+                                                     else 1)
+        done = run_pool(jobs, workers, scheduler, chain_threads=chain) if jobs else {}
+        for key, _ in jobs:
+            got_stairs(key, done[key])
+    else:
+        from .pool import run_inline
+        for key, make in jobs:
+            got_stairs(key, run_inline(make, threads))
     rows = []
     for r, f, st in combos:
         if (r, f) not in stairs:

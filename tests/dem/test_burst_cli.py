@@ -43,13 +43,29 @@ def _run(argv, capsys):
     return e.value.code, capsys.readouterr().err.strip().splitlines()
 
 
-def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys, monkeypatch):
+def _burst_args(biaxial, out, workers):
+    return ["burst", "--biaxial", str(biaxial), "--out", str(out), "--workers", str(workers),
+            "--threads", "1", "--max-steps", "200000"]
+
+
+@pytest.fixture(scope="module")
+def burst_300(biaxial_300, tmp_path_factory):
+    """`dem burst` on one worker, one thread, on the 300-disk test: (folder, {figure file:
+    figure} as saved, what it printed on stdout)."""
+    import contextlib
+    from io import StringIO
     from dem.__main__ import main
     from tests import _figures as F
-    caught = F.catch(monkeypatch)
-    out = tmp_path / "burst"
-    main(["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
-          "--threads", "1", "--max-steps", "200000"])
+    out = tmp_path_factory.mktemp("burst300") / "burst"
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(StringIO()) as printed:
+        caught = F.catch(mp)
+        main(_burst_args(biaxial_300, out, 1))
+    return out, caught, printed.getvalue()
+
+
+def test_burst_writes_the_contract_outputs(burst_300, biaxial_300):
+    from tests import _figures as F
+    out, caught, printed = burst_300
     for name, cols in CONTRACT.items():
         header, rows = io.read_csv(out / name)
         assert set(cols) <= set(header), (name, set(cols) - set(header))
@@ -94,7 +110,6 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys, monkey
         for sw in ("below", "past"):
             assert meshio.read(out / "anatomy" / f"{kind}_R-2_f0.9_{sw}_end.vtu").points.size
         assert (out / "anatomy" / f"{kind}_R-2_f0.9_past_onset.vtu").exists()
-    printed = capsys.readouterr().out
     assert "burst: " in printed and "theory passes" in printed
     # from rest: the path's start and loaded peak relaxed at fixed strain (rest.csv: c at rest
     # below the loaded c), the staircase of holds (stairs.csv), each switch held by a dead load
@@ -169,15 +184,62 @@ def test_burst_writes_the_contract_outputs(biaxial_300, tmp_path, capsys, monkey
                 assert q.get_clip_on() and q.get_clip_box() is ax.bbox
 
 
-def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, tmp_path,
-                                                                     capsys):
-    # a run interrupted after its path and relaxations resumes with them (the log says so and
-    # runs only the holds), to the same burst.csv; a folder of other options is refused with
-    # one line before anything is computed
+def _same_files(a, b):
+    """Every file of the burst folder ``a`` the same bytes as ``b``'s but the wall times
+    (probes.csv's column, summary.json's and burst_runs.jsonl's keys) and command.json (the
+    command line); the same file names."""
+    import os
+
+    def files(d):
+        return sorted(os.path.relpath(os.path.join(r, f), d) for r, _, fs in os.walk(d)
+                      for f in fs)
+
+    def strip(o):
+        if isinstance(o, dict):
+            return {k: strip(v) for k, v in o.items() if not k.endswith("wall_time")}
+        return [strip(v) for v in o] if isinstance(o, list) else o
+
+    assert files(a) == files(b)
+    for f in files(a):
+        x, y = (a / f).read_bytes(), (b / f).read_bytes()
+        if f == "command.json":
+            continue
+        if f == "probes.csv":
+            k = PROBE_COLUMNS.index("wall_time")
+            x, y = ([line.split(",")[:k] + line.split(",")[k + 1:] for line in z.decode().split("\n")]
+                    for z in (x, y))
+        elif f == "summary.json":
+            x, y = strip(json.loads(x)), strip(json.loads(y))
+        elif f == "burst_runs.jsonl":
+            x, y = ([strip(json.loads(line)) for line in z.splitlines()] for z in (x, y))
+        assert x == y, f
+
+
+def test_two_workers_write_the_files_of_one(burst_300, biaxial_300, tmp_path, capsys):
+    # the probes, the below run and the baselines beside the staircase, in the pool's other
+    # process, as their states come: the same files, row for row, as one worker running them
+    # one after another (the probes after the staircase)
     from dem.__main__ import main
+    out = tmp_path / "burst"
+    main(_burst_args(biaxial_300, out, 2))
+    err = capsys.readouterr().err
+    # the staircase went on while the probes ran: a probe finished before the search ended
+    assert err.index("probe at relaxed_start") < err.index("rest search:")
+    _same_files(out, burst_300[0])
+
+
+def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, tmp_path,
+                                                                     capsys, monkeypatch):
+    # a run interrupted after its path and relaxations resumes with them (the log says so and
+    # runs only the holds), to the same files; resumed on two workers and interrupted there
+    # once a probe is journaled, what had finished is not run again; a folder of other options
+    # is refused with one line before anything is computed
+    from dem.__main__ import main
+    from dem.burst.journal import _Journal
     out = tmp_path / "burst"
     args = ["burst", "--biaxial", str(biaxial_300), "--out", str(out), "--workers", "1",
             "--threads", "1", "--max-steps", "200000", "--max-holds", "5"]
+    two = args[:6] + ["2"] + args[7:]                         # --workers 2
     import dem.burst.stairs as b
     real = b.hold
     calls = {"n": 0}
@@ -200,14 +262,28 @@ def test_resume_keeps_the_finished_runs_and_refuses_another_folder(biaxial_300, 
     with open(journal, "a") as fh:
         fh.write('{"kind": "ho')                              # a torn last line
     capsys.readouterr()
-    main(args + ["--resume"])
+    kept, add = [], _Journal.add_probe
+
+    def add_then_stop(self, p):       # the pool's run stopped once its first probe is journaled
+        add(self, p)
+        kept.append(p.key)
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_Journal, "add_probe", add_then_stop)
+        with pytest.raises(SystemExit) as e:
+            main(two + ["--resume"])
+        assert e.value.code == 130 and len(kept) == 1
     err = capsys.readouterr().err
+    main(two + ["--resume"])
+    err += capsys.readouterr().err
     assert "resumed from" in err and "1 paths finished" in err
-    assert "state relaxed at fixed strain" not in err and "hold 0:" not in err and "hold 3:" in err
-    resumed = [(out / f).read_bytes() for f in ("stairs.csv", "rest.csv", "burst.csv")]
+    assert "state relaxed at fixed strain" not in err and "hold 0:" not in err
+    assert err.count("stair hold 3:") == 1 and f"probe at {kept[0]}:" not in err
     assert len(io.read_csv(out / "stairs.csv")[1]) == 5
-    main(args)                                                # the same, uninterrupted
-    assert [(out / f).read_bytes() for f in ("stairs.csv", "rest.csv", "burst.csv")] == resumed
+    whole = tmp_path / "whole"
+    main([str(whole) if a == str(out) else a for a in args])  # the same, uninterrupted
+    _same_files(out, whole)
     capsys.readouterr()
     code, err = _run(args + ["--resume", "--dc", "200"], capsys)
     assert code == 2 and len(err) == 1 and "--resume" in err[0], err

@@ -177,3 +177,26 @@ def test_stage_steps_and_the_cluster_estimate(tmp_path, capsys):
     two = [line for line in out.splitlines() if line.split()[:1] == ["2"]][0].split()
     assert float(two[4]) == pytest.approx(15000 / (20000 / 15) / 60, abs=0.05)
     assert float(two[5]) == pytest.approx(float(two[4]) + 62 / 60, abs=0.05)
+
+
+def test_the_cluster_estimate_replays_a_burst():
+    # a staircase in miniature (steps): the start relaxed (10), a hold that settles (10), one
+    # that fails (10: the past run); the loaded peak relaxed beside it (5); the below run (6)
+    # and a baseline (3) when the staircase ends; a probe (4) of every equilibrium
+    import importlib.util
+    from pathlib import Path
+    script = Path(__file__).resolve().parents[2] / "bench" / "cluster_estimate.py"
+    spec = importlib.util.spec_from_file_location("cluster_estimate", script)
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    run = {"path": 7, "chain": [("relax_start", 10), ("h0", 10), ("h1", 10)], "peak": 5,
+           "holds": {0: ("stair", "equilibrium", 10), 1: ("stair", "failure", 10),
+                     2: ("below", "equilibrium", 6), 3: ("baseline_past", "equilibrium", 3)},
+           "probes": {k: 4 for k in ("relaxed_start", "relaxed_peak", "h0_end", "h2_end",
+                                     "h3_end")}}
+    assert m.replay_burst([run], 1) == (7, 30 + 5 + 9 + 20)
+    # two workers: the chain on one (0-30), beside it the peak's relaxation (0-5) and the probes
+    # as their states come (5-9, 10-14, 20-24); then the below run and the baseline (30-36,
+    # 30-33) and the probes of their ends (33-37, 36-40)
+    assert m.replay_burst([run], 2) == (7, 40)
+    assert m.replay_burst([run], 8) == (7, 40)

@@ -140,29 +140,31 @@ def staircase_runs(path: PathResult, ratio: float, opts: BurstOptions, log, jour
             record(k, got)
         return done
 
-    def held(role, key, c_from, target):
-        """A hold of the chain: the staircase waits for it (``yield from``)."""
+    def enter(role, key, c_from, target):
+        """Hold k's place in the records, and its result if the journal has it (a resume)."""
         k = len(holds)
         holds.append((role, c_from, target, None))
         starts.append(key)
         got = journal.hold(k)
-        if got is None:
-            got = yield Call(hold, (journal.state(key), ratio, target, opts), {}, hold_done(k, key))
-        else:
+        if got is not None:
             record(k, got)
+        return k, got
+
+    def args(key, target):
+        return (journal.state(key), ratio, target, opts)
+
+    def held(role, key, c_from, target):
+        """A hold of the chain: the staircase waits for it (``yield from``)."""
+        k, got = enter(role, key, c_from, target)
+        if got is None:
+            got = yield Call(hold, args(key, target), {}, hold_done(k, key))
         return got
 
     def beside(role, key, c_from, target):
         """A hold nothing of the staircase waits for (the below run, the baselines)."""
-        k = len(holds)
-        holds.append((role, c_from, target, None))
-        starts.append(key)
-        got = journal.hold(k)
+        k, got = enter(role, key, c_from, target)
         if got is None:
-            tasks.start(hold, (journal.state(key), ratio, target, opts), {}, hold_done(k, key),
-                        first=True)
-        else:
-            record(k, got)
+            tasks.start(hold, args(key, target), {}, hold_done(k, key), first=True)
         return k
 
     switches, baselines = {}, {}

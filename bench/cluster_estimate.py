@@ -17,17 +17,24 @@ probes in one go: a run completed by `--resume` measured only what was left.
     python bench/cluster_estimate.py DIR3 --workers 1,2,8 [--rate 4400]   # DIR3: a `dem burst` folder
 
 A `dem burst` folder (its stairs.csv) is replayed as `run_burst` hands its runs out
-(`dem.burst.pool`): the paths first (one task each), then each staircase's chain (the start's
-relaxation and the holds of the staircase, one after another, always on a worker of their own),
-and beside it, on the workers the chains leave, the runs as their states come: the loaded peak's
-relaxation from the start, the probe of each equilibrium when its hold or relaxation ends, the
-below run and the baselines when the staircase ends and the probes of their ends after them; the
-runs that start others before the probes, then first asked, first run. Every run's length is its
-step count (rest.csv, stairs.csv, probes.csv, summary.json's paths) at one rate, ``--rate``
-steps a second a worker (default: the run's own probes', probes.csv's steps over wall_time); one
-worker runs everything one after another. The figures are those of the files' runs (a run's
-steps do not depend on the workers), a worker as fast as the rate says, dask's overhead (seconds
-a task) left out.
+(`dem.pool`): each path's chain (the path, the start's relaxation and the holds of the
+staircase, one after another, always on a worker of its own), and beside it, on the workers the
+chains leave, the runs as their states come: the loaded peak's relaxation once the path has
+ended, the probe of each equilibrium when its hold or relaxation ends, the below run and the
+baselines when the staircase ends and the probes of their ends after them; the runs that start
+others before the probes, then first asked, first run. Every run's length is its step count
+(rest.csv, stairs.csv, probes.csv, summary.json's paths) at one rate, ``--rate`` steps a second a
+worker (default: the run's own probes', probes.csv's steps over wall_time); one worker runs
+everything one after another. The figures are those of the files' runs (a run's steps do not
+depend on the workers), a worker as fast as the rate says, dask's overhead (seconds a task) left
+out.
+
+With ``--graph``, a `crosscheck` folder's two pooled DEM stages, its domain's waves and its burst
+section's runs (`DIR/dem/domain`, `DIR/burst/dem`), are replayed one after the other (the order
+of `run_crosscheck(..., graph=False)`) and as one pool (the graph: the domain's runs first asked,
+the burst's chain on a worker of its own), at the burst's probes' rate.
+
+    python bench/cluster_estimate.py DIR --graph --workers 1,2,8
 """
 from __future__ import annotations
 
@@ -75,18 +82,24 @@ def burst_runs(bdir):
     return out
 
 
-def replay_burst(runs, workers):
-    """The wall time of ``burst_runs``'s runs on ``workers`` workers, in steps of one worker, as
-    ``run_burst`` hands them out (the module doc): (paths, rest searches) ."""
+def replay_pool(runs, waves, workers):
+    """The wall time, in steps of one worker, of ``burst_runs``'s runs and the directional
+    analysis's ``waves`` (relaxations, elastic runs, sliding runs, or None) on ``workers``
+    workers of one pool, as ``dem.pool`` hands them out (the module doc): each path's chain (its
+    path, its start's relaxation, its holds) always on a worker of its own; beside the chains, on
+    the workers they leave, the runs as they are asked for: the domain's waves (each once the
+    one before has ended) and the burst's side runs, those that start others first, then first
+    asked, first run. One worker runs everything one after another."""
     import heapq
-    paths = makespan([r["path"] for r in runs], workers)
+    waves = [list(w) for w in (waves or ()) if w]
     if workers == 1:
-        return paths, float(sum(sum(s for _, s in r["chain"]) + (r["peak"] or 0)
-                                + sum(h[2] for k, h in r["holds"].items() if h[0] != "stair")
-                                + sum(r["probes"].values()) for r in runs))
+        return float(sum(r["path"] + sum(s for _, s in r["chain"]) + (r["peak"] or 0)
+                         + sum(h[2] for k, h in r["holds"].items() if h[0] != "stair")
+                         + sum(r["probes"].values()) for r in runs) + sum(map(sum, waves)))
     t, seq = 0.0, [0]
-    queue, running = [], []          # (rank, order, (path, name, steps)); (end, order, ...)
+    queue, running = [], []          # (rank, order, (owner, name, steps)); (end, order, ...)
     chains = {}                      # path -> index of its running chain run
+    wave = {"k": -1, "left": 0}      # the domain's wave under way, its runs not yet ended
 
     def ask(i, name, steps, first=False):
         seq[0] += 1
@@ -102,18 +115,25 @@ def replay_burst(runs, workers):
 
     def next_chain(i):
         r, k = runs[i], chains.get(i, -1) + 1
-        if k < len(r["chain"]):
+        links = [("path", r["path"])] + r["chain"]
+        if k < len(links):
             chains[i] = k
-            run(i, r["chain"][k][0], r["chain"][k][1], True)
+            run(i, links[k][0], links[k][1], True)
             return
         chains.pop(i, None)
         for k, (role, _, steps) in sorted(r["holds"].items()):
             if role != "stair":
                 ask(i, f"h{k}", steps, first=True)
 
+    def next_wave():
+        while wave["left"] == 0 and wave["k"] + 1 < len(waves):
+            wave["k"] += 1
+            wave["left"] = len(waves[wave["k"]])
+            for steps in waves[wave["k"]]:
+                ask(-1, "domain", steps)
+
+    next_wave()                      # the domain's job is the first of the pool's
     for i, r in enumerate(runs):
-        if r["peak"] is not None:
-            ask(i, "relax_peak", r["peak"], first=True)
         next_chain(i)
 
     def fill():
@@ -126,39 +146,75 @@ def replay_burst(runs, workers):
     fill()
     while running:
         t, _, (i, name, chain) = heapq.heappop(running)
-        if name.startswith("relax_"):
+        if i < 0:
+            wave["left"] -= 1
+            next_wave()
+        elif name == "path":
+            if runs[i]["peak"] is not None:
+                ask(i, "relax_peak", runs[i]["peak"], first=True)
+        elif name.startswith("relax_"):
             probe(i, "relaxed_" + name[len("relax_"):])
         elif name.startswith("h") and runs[i]["holds"][int(name[1:])][1] == "equilibrium":
             probe(i, name + "_end")
         if chain:
             next_chain(i)
         fill()
-    return paths, t
+    return t
+
+
+def _probe_rate(bdir):
+    """Steps a second of one worker: the burst's probes' (probes.csv's steps over wall_time)."""
+    rows = _csv(os.path.join(bdir, "probes.csv"))
+    steps, wall = sum(int(float(x["steps"])) for x in rows), sum(float(x["wall_time"]) for x in rows)
+    return steps / wall if steps and wall else None
 
 
 def main_burst(a, counts):
     runs = burst_runs(a.dir)
     steps = sum(sum(r["probes"].values()) for r in runs)
     if a.rate is None:
-        wall = sum(float(x["wall_time"]) for x in _csv(os.path.join(a.dir, "probes.csv")))
-        if not steps or not wall:
+        a.rate = _probe_rate(a.dir)
+        if a.rate is None:
             sys.exit("no probes to take the rate from: give --rate")
-        a.rate = steps / wall
     chain = sum(sum(s for _, s in r["chain"]) for r in runs)
-    total = sum(replay_burst(runs, 1))
+    total = replay_pool(runs, None, 1)
     print(f"{a.dir}: {len(runs)} path(s), {total / 1e6:.2f} million steps of runs (the paths "
           f"{sum(r['path'] for r in runs) / 1e6:.2f}, the staircases' chains {chain / 1e6:.2f}, "
           f"the probes {steps / 1e6:.2f}); {a.rate:.0f} steps/s a worker")
-    print(f"{'workers':>8} {'paths':>8} {'rest':>8} {'total':>8}   (minutes)   of one worker")
+    print(f"{'workers':>8} {'minutes':>8}   of one worker")
     for n in counts:
-        p, s = replay_burst(runs, n)
-        print(f"{n:>8} {p / a.rate / 60:>8.1f} {s / a.rate / 60:>8.1f} {(p + s) / a.rate / 60:>8.1f}"
-              f"   {(p + s) / total:>22.3f}")
+        s = replay_pool(runs, None, n)
+        print(f"{n:>8} {s / a.rate / 60:>8.1f}   {s / total:>14.3f}")
     floor = max(r["path"] + sum(s for _, s in r["chain"]) + max(
         [h[2] + r["probes"].get(f"h{k}_end", 0) for k, h in r["holds"].items()
          if h[0] != "stair"] + [0]) for r in runs)
     print(f"floor (a path, its staircase, then its longest hold beside it and that hold's probe):"
           f" {floor / a.rate / 60:.1f} min, {floor / total:.3f} of one worker")
+
+
+def main_graph(a, counts):
+    """A crosscheck folder with its burst section: the DEM's pooled stages (its domain's waves
+    and the burst's runs) one after the other and as one pool, on N workers."""
+    ddir, bdir = os.path.join(a.dir, "dem", "domain"), os.path.join(a.dir, "burst", "dem")
+    runs, waves = burst_runs(bdir), stage_steps(ddir)
+    rate = a.rate or _probe_rate(bdir)
+    if rate is None:
+        sys.exit("no probes to take the rate from: give --rate")
+    dom, bur = sum(map(sum, waves)), replay_pool(runs, None, 1)
+    print(f"{a.dir}: the domain {len(waves[0])} relaxations and {len(waves[1]) + len(waves[2])} "
+          f"probe runs, {dom / 1e6:.2f} million steps; the burst {bur / 1e6:.2f} million steps; "
+          f"{rate:.0f} steps/s a worker (the burst's probes')")
+    print(f"{'workers':>8} {'domain':>8} {'burst':>8} {'one after':>10} {'one pool':>9} "
+          f"{'ratio':>6}   (minutes of the DEM's pooled stages)")
+    for n in counts:
+        d = sum(makespan(w, n) for w in waves if w)
+        b = replay_pool(runs, None, n)
+        g = replay_pool(runs, waves, n)
+        print(f"{n:>8} {d / rate / 60:>8.1f} {b / rate / 60:>8.1f} {(d + b) / rate / 60:>10.1f} "
+              f"{g / rate / 60:>9.1f} {g / (d + b):>6.3f}")
+    chain = max(r["path"] + sum(s for _, s in r["chain"]) for r in runs)
+    print(f"floor: the longest chain (a path and its staircase) {chain / rate / 60:.1f} min; "
+          f"all the steps over N workers {(dom + bur) / rate / 60:.1f} / N min")
 
 
 def main(argv=None):
@@ -174,12 +230,17 @@ def main(argv=None):
                          "DIR/conclusions.json)")
     ap.add_argument("--rate", type=float, default=None,
                     help="a dem burst folder: steps a second of one worker (default: its probes')")
+    ap.add_argument("--graph", action="store_true",
+                    help="a crosscheck folder: its domain and its burst one after the other "
+                         "against one pool (crosscheck.run's graph)")
     a = ap.parse_args(argv)
     counts = [int(w) for w in a.workers.split(",")]
     if a.measured_workers < 1 or min(counts) < 1:
         ap.error("--workers and --measured-workers: allowed integers >= 1")
     if os.path.exists(os.path.join(a.dir, "stairs.csv")):
         return main_burst(a, counts)
+    if a.graph:
+        return main_graph(a, counts)
     ddir = os.path.join(a.dir, "dem", "domain")
     fixed, seconds = {}, a.seconds
     if os.path.isdir(ddir):

@@ -18,7 +18,7 @@ import os
 import sys
 import time
 
-__all__ = ["hmodel_part", "fem_part", "dem_part", "comparison_state", "ETA_P3", "ETA2_OF_P3",
+__all__ = ["hmodel_part", "fem_part", "dem_part", "dem_job", "comparison_state", "ETA_P3", "ETA2_OF_P3",
            "say", "quiet"]
 
 
@@ -117,8 +117,22 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
     ``params``: DemParams of the sample (default: the paper's set); n and seed override it.
     ``verbose``: progress lines on stderr.
     """
+    from dem.pool import run_jobs
+    make, finish = dem_job(out_dir, n, seed, rate, eta_a, threads, alphas, max_steps, resume,
+                           domain, hmodel_boundary, params, verbose)
+    return finish(run_jobs([("dem", make)], workers, scheduler)["dem"])
+
+
+def dem_job(out_dir, n=1000, seed=1, rate=0.05, eta_a=1.029, threads=None, alphas=None,
+            max_steps=None, resume=False, domain=True, hmodel_boundary=None, params=None,
+            verbose=True):
+    """``dem_part`` in two: the compaction and the biaxial test now (or, with ``resume``, read
+    back), then ``(make, finish)``: ``make(tasks)`` the generator of the relaxations and probe
+    runs for ``dem.pool`` (``dem.domain.domain_job``), ``finish(result)`` its files and the
+    part's dict (what ``dem_part`` returns). The cross-check runs ``make`` beside the DEM burst's
+    staircases on one pool (``crosscheck.run``)."""
     from dem import io
-    from dem.domain import run_domain
+    from dem.domain import domain_job
     from dem.experiment import COLUMNS, SAVE_FRACTIONS, BiaxialResult, run_biaxial
     from dem.params import DemParams
     from dem.probes import ProbeOptions, directions
@@ -159,22 +173,27 @@ def dem_part(out_dir, n=1000, seed=1, rate=0.05, workers=None, eta_a=1.029, thre
         return [nm for nm, _, oc, _ in refs if domain and oc == "equilibrium"] + [name]
 
     ddir = os.path.join(out_dir, "domain")
-    drows, bounds, probes_by = run_domain(bdir, ddir, alphas=alphas, opts=opts, workers=workers,
-                                          scheduler=scheduler, resume=resume,
-                                          hmodel=hmodel_boundary or False,
-                                          choose=choose, verbose=verbose)
-    probes = probes_by[chosen["state"]]
-    stages = {"compaction + biaxial test (when it ran)": res.wall_time,
-              "relaxations and probes (this run)": time.time() - t_probes0}
-    eta_peak = bounds["eta_peak"]
-    return {"biaxial_rows": res.rows, "state_a": res.state_a_path, "eta_a_reached": res.eta_a_reached,
-            "n": n, "rate": rate,
-            "compaction": res.compaction, "probes": probes, "comparison": chosen,
-            "probes_dir": os.path.join(ddir, chosen["state"]),
-            "reference_converged": True, "domain_rows": drows, "domain_bounds": bounds,
-            "domain_dir": ddir, "eta_peak": eta_peak, "stage_times": stages,
-            "probes_by_state": probes_by,
-            "p3_state": _p3_state(res.rows, eta_peak)}
+    make, finish_domain = domain_job(bdir, ddir, alphas=alphas, opts=opts, resume=resume,
+                                     hmodel=hmodel_boundary or False, choose=choose,
+                                     verbose=verbose)
+
+    def finish(result):
+        drows, bounds, probes_by = finish_domain(result)
+        probes = probes_by[chosen["state"]]
+        stages = {"compaction + biaxial test (when it ran)": res.wall_time,
+                  "relaxations and probes (this run)": time.time() - t_probes0}
+        eta_peak = bounds["eta_peak"]
+        return {"biaxial_rows": res.rows, "state_a": res.state_a_path,
+                "eta_a_reached": res.eta_a_reached,
+                "n": n, "rate": rate,
+                "compaction": res.compaction, "probes": probes, "comparison": chosen,
+                "probes_dir": os.path.join(ddir, chosen["state"]),
+                "reference_converged": True, "domain_rows": drows, "domain_bounds": bounds,
+                "domain_dir": ddir, "eta_peak": eta_peak, "stage_times": stages,
+                "probes_by_state": probes_by,
+                "p3_state": _p3_state(res.rows, eta_peak)}
+
+    return make, finish
 
 
 def _p3_state(rows, eta_peak):

@@ -10,7 +10,7 @@ import os
 __all__ = ["write_report"]
 
 
-def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
+def write_report(out, c: dict, figs: dict, timings: dict, config: dict, graph: dict | None = None):
     """report.md: every figure embedded and the paper's section-5 conclusions in numbers."""
     from common.io import atomic_open
     from dem.domain import eta_lim_text
@@ -145,6 +145,23 @@ def write_report(out, c: dict, figs: dict, timings: dict, config: dict):
         L += [""] + burst_report_lines(c["burst"], figs.get("burst"), figs.get("burst_eq1"),
                                        figs.get("burst_w2"))
     L += ["", "## Wall times", ""] + [f"- {k}: {v:.1f} s" for k, v in timings.items()] + [""]
+    if graph:
+        L += graph_lines(graph)
     with atomic_open(os.path.join(out, "report.md")) as f:
         f.write("\n".join(L))
 
+
+
+def graph_lines(graph: dict) -> list:
+    """The stages' graph of a run (``crosscheck.run.critical_path``): every stage's start and
+    end, what it waited for, and the critical path, as report lines."""
+    mode = ("the DEM's stages after its biaxial test on one pool" if graph["mode"] == "graph"
+            else "the DEM's stages one after the other")
+    L = [f"Wall time {graph['wall_time']:.1f} s ({mode}); the stages' own times add up to "
+         f"{graph['busy']:.1f} s.", "",
+         "| stage | start [s] | end [s] | waited for |", "|---|---|---|---|"]
+    L += [f"| {s['name']} | {s['start']:.1f} | {s['end']:.1f} | {', '.join(s['after']) or '-'} |"
+          for s in sorted(graph["stages"], key=lambda s: (s["start"], s["end"]))]
+    L += ["", "Critical path (each stage the one its successor waited for that ended last): "
+          + " -> ".join(graph["critical_path"]) + ".", ""]
+    return L

@@ -31,8 +31,8 @@ from common.io import atomic_write_bytes
 
 from . import io
 from .params import record_params
-from .probes import (COLUMNS as PROBE_COLUMNS, ProbeOptions, _map, csv_rows, directions,
-                     reference_state, run_probe_sets, state_fingerprint, write_probe_files)
+from .probes import (COLUMNS as PROBE_COLUMNS, ProbeOptions, csv_rows, directions,
+                     reference_state, state_fingerprint, write_probe_files)
 
 DOMAIN_COLUMNS = ["state", "eta", "eta_fraction", "eps1", "p", "q", "reference", "probed",
                   "n_equilibrium", "n_failure", "n_undecided", "min_w2", "alpha_min_w2",
@@ -184,7 +184,29 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
     (default: every state whose reference held).  Returns (domain rows, boundaries, rows of
     probes by state name). States of parameters outside the granular regime at the test's sigma2
     (``dem.regime.check_biaxial_regime``) are refused unless ``allow_soft``; boundaries.json
-    records the regime (``regime``)."""
+    records the regime (``regime``). The runs: ``domain_job``'s, on ``workers`` local processes
+    or the dask cluster at ``scheduler`` (``dem.pool``)."""
+    from .pool import run_jobs
+    make, finish = domain_job(biaxial_dir, out_dir, states, alphas, opts, resume, verbose,
+                              hmodel, choose, allow_soft)
+    return finish(run_jobs([("domain", make)], workers, scheduler)["domain"])
+
+
+def _relax_run(state, opts, out_dir, resume, threads=None):
+    """A relaxation of a saved state, a task of ``dem.pool`` (one thread, as a probe)."""
+    return _relax_task((state, opts, out_dir, resume))
+
+
+def domain_job(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions(),
+               resume=False, verbose=True, hmodel=True, choose=None, allow_soft=False):
+    """``run_domain`` in two: the checks and the folders now, then ``(make, finish)``:
+    ``make(tasks)`` the generator of its runs for ``dem.pool`` (every relaxation, then the
+    probes of ``choose``'s states, ``dem.probes.probe_sets_runs``), ``finish(result)`` the
+    files and figures from what the generator returned; ``finish`` returns what
+    ``run_domain`` does. The cross-check runs ``make`` beside the burst's staircases on one
+    pool."""
+    from .pool import WAIT
+    from .probes import probe_sets_runs
     from .regime import check_biaxial_regime
     opts.validate()
     alphas = directions() if alphas is None else [float(a) for a in alphas]
@@ -202,50 +224,63 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
         ck = os.path.join(d, "probe_runs.jsonl")
         if not resume and os.path.exists(ck):
             os.remove(ck)
-    log(f"{len(todo)} states x {len(alphas)} directions x 2 runs; relaxing the references")
-    refs = [None] * len(todo)
 
-    def got_ref(k, res):
-        refs[k] = res
-        log(f"reference of {todo[k][0]}: {res[1]} ({sum(r is not None for r in refs)}/{len(refs)}, "
-            f"{time.time() - t0:.0f} s)")
+    def make(tasks):
+        log(f"{len(todo)} states x {len(alphas)} directions x 2 runs; relaxing the references")
+        refs = [None] * len(todo)
 
-    _map([(k, (st, opts, d, resume)) for k, ((_, st, _), d) in enumerate(zip(todo, dirs))],
-         got_ref, workers, scheduler, fn=_relax_task)
-    live = [k for k in range(len(todo)) if refs[k][1] != "failure"]
-    if choose is not None:
-        names = set(choose([(todo[k][0], refs[k][0], refs[k][1], todo[k][2]) for k in range(len(todo))]))
-        live = [k for k in live if todo[k][0] in names]
-    sets = [(refs[k][0], alphas, os.path.join(dirs[k], "probe_runs.jsonl")) for k in live]
-    nf = sum(r[1] == "failure" for r in refs)
-    log(f"probes of {len(live)} of {len(todo)} states ({nf} references failed: above eta_lim)")
-    results = run_probe_sets(sets, opts, workers, scheduler, verbose)
-    by = dict(zip(live, results))
-    drows, prow = [], []
-    for k, (name, st, meta) in enumerate(todo):
-        rows = by.get(k, [])
-        if rows:
-            write_probe_files(rows, dirs[k], note=f"{name}, {st.params.n} disks")
-        drows.append(state_row(name, meta["row"], eta_peak, refs[k][1], rows, refs[k][0]))
-        prow += [[name, drows[-1]["eta"]] + r for r in csv_rows(rows)]
-    io.write_csv(os.path.join(out_dir, "domain.csv"), DOMAIN_COLUMNS,
-                 [[r[c] for c in DOMAIN_COLUMNS] for r in drows])
-    io.write_csv(os.path.join(out_dir, "domain_probes.csv"), ["state", "state_eta"] + PROBE_COLUMNS,
-                 prow)
-    b = boundaries(drows, eta_peak)
-    b.update(n_disks=todo[0][1].params.n if todo else None, wall_time=time.time() - t0,
-             directions=alphas, options=opts._asdict(), biaxial=os.path.abspath(biaxial_dir),
-             fingerprints={name: state_fingerprint(st) for name, st, _ in todo}, regime=regime)
-    hm = (hmodel if isinstance(hmodel, dict) else
-          hmodel_boundary(todo[0][1].control.s_to[0] if todo else 200e3) if hmodel else None)
-    if hm:
-        b["hmodel"] = hm
-    atomic_write_bytes(os.path.join(out_dir, "boundaries.json"),
-                          json.dumps(b, indent=1, default=float).encode())
-    plot_domain(drows, by, todo, b, out_dir)
-    log(f"done in {time.time() - t0:.0f} s: lower boundary {b['lower_state']} "
-        f"(eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the peak); {eta_lim_text(b)}")
-    return drows, b, {todo[k][0]: by[k] for k in by}
+        def got_ref(k):
+            def done(res):
+                refs[k] = res
+                log(f"reference of {todo[k][0]}: {res[1]} ({sum(r is not None for r in refs)}/"
+                    f"{len(refs)}, {time.time() - t0:.0f} s)")
+            return done
+
+        for k, ((_, st, _), d) in enumerate(zip(todo, dirs)):
+            tasks.start(_relax_run, (st, opts, d, resume), {}, got_ref(k))
+        yield WAIT
+        live = [k for k in range(len(todo)) if refs[k][1] != "failure"]
+        if choose is not None:
+            names = set(choose([(todo[k][0], refs[k][0], refs[k][1], todo[k][2])
+                                for k in range(len(todo))]))
+            live = [k for k in live if todo[k][0] in names]
+        sets = [(refs[k][0], alphas, os.path.join(dirs[k], "probe_runs.jsonl")) for k in live]
+        nf = sum(r[1] == "failure" for r in refs)
+        log(f"probes of {len(live)} of {len(todo)} states ({nf} references failed: above eta_lim)")
+        results = yield from probe_sets_runs(sets, opts, verbose, tasks)
+        return refs, dict(zip(live, results))
+
+    def finish(result):
+        refs, by = result
+        drows, prow = [], []
+        for k, (name, st, meta) in enumerate(todo):
+            rows = by.get(k, [])
+            if rows:
+                write_probe_files(rows, dirs[k], note=f"{name}, {st.params.n} disks")
+            drows.append(state_row(name, meta["row"], eta_peak, refs[k][1], rows, refs[k][0]))
+            prow += [[name, drows[-1]["eta"]] + r for r in csv_rows(rows)]
+        io.write_csv(os.path.join(out_dir, "domain.csv"), DOMAIN_COLUMNS,
+                     [[r[c] for c in DOMAIN_COLUMNS] for r in drows])
+        io.write_csv(os.path.join(out_dir, "domain_probes.csv"),
+                     ["state", "state_eta"] + PROBE_COLUMNS, prow)
+        b = boundaries(drows, eta_peak)
+        b.update(n_disks=todo[0][1].params.n if todo else None, wall_time=time.time() - t0,
+                 directions=alphas, options=opts._asdict(), biaxial=os.path.abspath(biaxial_dir),
+                 fingerprints={name: state_fingerprint(st) for name, st, _ in todo},
+                 regime=regime)
+        hm = (hmodel if isinstance(hmodel, dict) else
+              hmodel_boundary(todo[0][1].control.s_to[0] if todo else 200e3) if hmodel else None)
+        if hm:
+            b["hmodel"] = hm
+        atomic_write_bytes(os.path.join(out_dir, "boundaries.json"),
+                           json.dumps(b, indent=1, default=float).encode())
+        plot_domain(drows, by, todo, b, out_dir)
+        log(f"done in {time.time() - t0:.0f} s: lower boundary {b['lower_state']} "
+            f"(eta {b['lower_eta']:.4f}, {b['lower_eta_fraction']:.3f} of the peak); "
+            f"{eta_lim_text(b)}")
+        return drows, b, {todo[k][0]: by[k] for k in by}
+
+    return make, finish
 
 
 def makespan(durations, workers: int) -> float:

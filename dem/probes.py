@@ -31,6 +31,7 @@ from common.io import atomic_open
 from common.threads import ThreadChooser
 
 from .ledger import Ledger, max_eq1_bookkeeping
+from .pool import NEEDS_DASK
 from .settle import HISTORY_COLUMNS, SettleRule, settle, voigt_strain
 from .simulation import Simulation, State
 from .walls import DEAD, TIED, stress_path
@@ -357,7 +358,27 @@ def run_probes(state: State, alphas, opts: ProbeOptions = ProbeOptions(), worker
 def run_probe_sets(sets, opts: ProbeOptions = ProbeOptions(), workers=None, scheduler=None,
                    verbose=True):
     """``run_probes`` of several states as one pool of independent runs: ``sets`` is a list of
-    (state, alphas, checkpoint or None); returns one list of rows per set."""
+    (state, alphas, checkpoint or None); returns one list of rows per set. The runs are
+    ``probe_sets_runs``'s, on ``workers`` local processes or the dask cluster at ``scheduler``
+    (``dem.pool``; on one worker in this process)."""
+    from .pool import run_jobs
+    return run_jobs([("probes", lambda tasks: probe_sets_runs(sets, opts, verbose, tasks))],
+                    workers, scheduler)["probes"]
+
+
+def _probe_task(state, alpha, sliding, opts, de_el, threads=None):
+    """One probe run, a task of ``dem.pool``: on one thread whatever the pool offers (a probe
+    is short; many run side by side)."""
+    return _task((state, alpha, sliding, opts, de_el))
+
+
+def probe_sets_runs(sets, opts: ProbeOptions, verbose, tasks):
+    """``run_probe_sets``'s runs as a generator of ``dem.pool`` (``tasks.start`` a run,
+    ``yield WAIT`` for them): every elastic run (sliding prevented), then every sliding run
+    with its elastic strain. Every finished run is appended to its set's checkpoint as it comes
+    in; the rows do not depend on the order the runs finish in. Returns one list of rows per
+    set."""
+    from .pool import WAIT
     opts.validate()
     key = lambda a, s: (float(a) % 360.0, bool(s))
     t0 = time.time()
@@ -384,31 +405,36 @@ def run_probe_sets(sets, opts: ProbeOptions = ProbeOptions(), workers=None, sche
         sinks.append(open(checkpoint, "a") if checkpoint else None)
     count = [sum(len(o) for o in outs)]
 
-    def collect(k, r):
-        outs[k][key(r["alpha_sigma"], r["sliding"])] = r
-        if sinks[k] is not None:
-            sinks[k].write(json.dumps(r) + "\n")
-            sinks[k].flush()
-            os.fsync(sinks[k].fileno())
-        count[0] += 1
-        _report(r, count[0], total, t0, verbose)
+    def collect(k):
+        def done(r):
+            outs[k][key(r["alpha_sigma"], r["sliding"])] = r
+            if sinks[k] is not None:
+                sinks[k].write(json.dumps(r) + "\n")
+                sinks[k].flush()
+                os.fsync(sinks[k].fileno())
+            count[0] += 1
+            _report(r, count[0], total, t0, verbose)
+        return done
 
     try:
         # phase 1: elastic runs; phase 2: sliding runs with their elastic strain
-        _map([(k, (st, a, False, opts, None)) for k, (st, _, _) in enumerate(sets)
-              for a in alist[k] if key(a, False) not in outs[k]], collect, workers, scheduler)
-        de_el = lambda k, a: float(np.hypot(outs[k][key(a, False)]["de1"],
-                                            outs[k][key(a, False)]["de2"]))
-        _map([(k, (st, a, True, opts, de_el(k, a))) for k, (st, _, _) in enumerate(sets)
-              for a in alist[k] if key(a, True) not in outs[k]], collect, workers, scheduler)
+        for k, (st, _, _) in enumerate(sets):
+            for a in alist[k]:
+                if key(a, False) not in outs[k]:
+                    tasks.start(_probe_task, (st, a, False, opts, None), {}, collect(k))
+        yield WAIT
+        for k, (st, _, _) in enumerate(sets):
+            for a in alist[k]:
+                if key(a, True) not in outs[k]:
+                    de_el = float(np.hypot(outs[k][key(a, False)]["de1"],
+                                           outs[k][key(a, False)]["de2"]))
+                    tasks.start(_probe_task, (st, a, True, opts, de_el), {}, collect(k))
+        yield WAIT
     finally:
         for f in sinks:
             if f is not None:
                 f.close()
     return [combine(list(o.values()), opts) for o in outs]
-
-
-NEEDS_DASK = "--scheduler needs dask.distributed (pip install 'granular-w2[distributed]')"
 
 
 def check_scheduler(address: str, timeout: float = 5.0) -> None:

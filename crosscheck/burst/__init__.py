@@ -13,9 +13,10 @@ Modules: ``part`` (the runs of the three parts and the section's numbers), ``fig
 ``report`` (the section of report.md).
 """
 from .figures import burst_eq1_figure, burst_figure, w2_path_figure
-from .part import BURST_FRACTIONS, BURST_RATIOS, burst_conclusions, burst_part, w2_paths
+from .part import (BURST_FRACTIONS, BURST_RATIOS, burst_conclusions, burst_jobs, burst_part,
+                   w2_paths)
 from .report import burst_report_lines
 
-__all__ = ["burst_part", "burst_conclusions", "burst_figure", "burst_eq1_figure",
+__all__ = ["burst_part", "burst_jobs", "burst_conclusions", "burst_figure", "burst_eq1_figure",
            "burst_report_lines", "w2_paths", "w2_path_figure",
            "BURST_RATIOS", "BURST_FRACTIONS"]

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-__all__ = ["burst_part", "burst_conclusions", "w2_paths", "BURST_RATIOS", "BURST_FRACTIONS",
+__all__ = ["burst_part", "burst_jobs", "burst_conclusions", "w2_paths", "BURST_RATIOS", "BURST_FRACTIONS",
            "PARTS", "LABEL"]
 
 BURST_RATIOS = (-2.0,)
@@ -47,9 +47,23 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
                verbose=True) -> dict:
     """Run the three parts' burst experiments into ``out_dir``/burst/{hmodel,fem,dem}
     (``log``: the section's progress lines; ``verbose``: the DEM's own).
-    ``dem_biaxial_dir``: a ``dem biaxial`` folder with its states (None: no DEM part).
+    ``dem_biaxial_dir``: a ``dem biaxial`` folder with its states (None: no DEM part), its runs
+    on ``workers`` local processes (``dem.pool``).
     Returns {part: {"rows": burst rows (dicts), "histories": E_c per volume against time,
     "eta_peak": the part's drained peak eta}}."""
+    from dem.pool import run_jobs
+    jobs, finish = burst_jobs(out_dir, dem_biaxial_dir, ratios, fractions, fem_mesh, fem_n_dir,
+                              dem_rate, log, verbose)
+    return finish(run_jobs(jobs, workers, None, None, None if len(jobs) == 1 else 1))
+
+
+def burst_jobs(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BURST_FRACTIONS,
+               fem_mesh=(4, 8), fem_n_dir=72, dem_rate=0.01, log=print, verbose=True):
+    """``burst_part`` in two: the material point's and the FE specimen's runs now (seconds),
+    then ``(jobs, finish)``: ``jobs`` the DEM's staircases as generators of runs for
+    ``dem.pool`` (``dem.burst.burst_job``; none without ``dem_biaxial_dir``), ``finish(results)``
+    the DEM's files from {tag: result} and the section's dict (what ``burst_part`` returns).
+    The cross-check runs the jobs beside the DEM's directional analysis on one pool."""
     from hmodel import HParams
     from point import burst as hb
     from fem.biaxial import BiaxialConfig
@@ -87,20 +101,27 @@ def burst_part(out_dir, dem_biaxial_dir=None, ratios=BURST_RATIOS, fractions=BUR
                   "eta_peak": f.summary["material_point_drained_peak"]["eta"],
                   "histories": _csv_histories(os.path.join(fdir, "history.csv"), "ke",
                                               fb.width * fb.height)}
-    if dem_biaxial_dir is not None:
-        from dem import io
-        from dem.burst import BurstOptions, run_burst as dem_burst
-        log(f"burst: DEM sample of {dem_biaxial_dir}")
-        ddir = os.path.join(out_dir, "burst", "dem")
-        rows, summ = dem_burst(dem_biaxial_dir, ddir, list(ratios), list(fractions),
-                               BurstOptions(rate=dem_rate), workers=workers, verbose=verbose)
-        st, _ = io.load_state(os.path.join(dem_biaxial_dir, "states", f"state_f{fractions[0]:.3f}.npz"))
+    if dem_biaxial_dir is None:
+        return [], lambda results: out
+    from dem import io
+    from dem.burst import BurstOptions, burst_job
+    log(f"burst: DEM sample of {dem_biaxial_dir}")
+    ddir = os.path.join(out_dir, "burst", "dem")
+    jobs, finish_dem = burst_job(dem_biaxial_dir, ddir, list(ratios), list(fractions),
+                                 BurstOptions(rate=dem_rate), verbose=verbose)
+
+    def finish(results):
+        rows, summ = finish_dem({tag: results[tag] for tag, _ in jobs})
+        st, _ = io.load_state(os.path.join(dem_biaxial_dir, "states",
+                                           f"state_f{fractions[0]:.3f}.npz"))
         vol = (st.walls[1] - st.walls[0]) * (st.walls[3] - st.walls[2]) * st.params.thickness
         out["dem"] = {"rows": _rows(rows), "eta_peak": summ["drained_eta_peak"],
                       "w2_path": _dem_w2_path(summ),
                       "histories": _csv_histories(os.path.join(ddir, "history.csv"),
                                                   "ke_backbone", vol)}
-    return out
+        return out
+
+    return jobs, finish
 
 
 def _fem_w2_path(paths_csv, rows):

@@ -51,10 +51,11 @@ closed to round-off (``w2_ext``, ``w2_int``, ``u0``, ``eq1_bookkeeping``).
 
 Modules: ``options`` (``BurstOptions`` and the peak rule), ``runs`` (the path, the relaxation at
 fixed strain, the kinematic probe of the path, the held run), ``stairs`` (the staircase: the c
-peak at rest, the below and past runs), ``pool`` (the runs of the staircases in this process or
-over workers: the probes beside the staircase), ``journal`` (a staircase's journal and the
+peak at rest, the below and past runs; its runs go to ``dem.pool``, in this process or over
+workers: the probes beside the staircase), ``journal`` (a staircase's journal and the
 command's checkpoint), ``theory`` (k_path's noise and the theory's verdict), ``report`` (the rows
-and files), ``figures``, ``command`` (``check_sample_size``, ``load_starts``, ``run_burst``).
+and files), ``figures``, ``command`` (``check_sample_size``, ``load_starts``, ``run_burst``,
+``burst_job``: its runs as generators for one pool with other work).
 """
 from .options import BurstOptions, HOLDS, SWITCHES, below_row, confirm_peak, scan_peak
 from .runs import (H, HISTORY_COLUMNS, HOLD_ANATOMY_COLUMNS, HOLD_LEDGER_COLUMNS, HoldResult, ONSET,
@@ -69,7 +70,7 @@ from .figures import OUTCOME_COLOR, plot_burst, plot_k_path
 from .report import (BURST_COLUMNS, PROBE_COLUMNS, REST_COLUMNS, STAIR_COLUMNS, burst_row,
                      write_burst_files)
 # check_ratio: dem.__main__'s --ratios
-from .command import check_ratio, check_sample_size, load_starts, run_burst
+from .command import burst_job, check_ratio, check_sample_size, load_starts, run_burst
 
 __all__ = ["AVALANCHE", "below_row", "BURST_COLUMNS", "burst_row", "BurstOptions", "check_ratio",
            "check_sample_size", "checkpoint_header", "CLEARLY", "confirm_peak", "growth", "H", "HISTORY_COLUMNS",
@@ -78,6 +79,7 @@ __all__ = ["AVALANCHE", "below_row", "BURST_COLUMNS", "burst_row", "BurstOptions
            "ke_growth", "load_starts", "ONSET", "OUTCOME_COLOR", "PATH_COLUMNS",
            "PATH_LEDGER_COLUMNS", "path_probe", "PathResult", "plot_burst", "plot_k_path",
            "PROBE_COLUMNS", "probe_rate_of", "ProbeResult", "proportional_path", "read_checkpoint",
-           "relax", "RelaxResult", "REST_COLUMNS", "run_burst", "scan_peak", "STAIR_COLUMNS",
+           "relax", "RelaxResult", "REST_COLUMNS", "run_burst", "burst_job", "scan_peak",
+           "STAIR_COLUMNS",
            "staircase", "staircase_verdict", "StairResult", "SWITCHES", "theory_verdict", "UNLOADED",
            "verdict_of_folder", "wall_mass_rule", "wall_work", "write_burst_files"]

@@ -94,7 +94,7 @@ def _path_task(args):
 
 
 def _stairs_job(path, ratio, fraction, opts, verbose, base, resume):
-    """(tag, make) of one path's staircase for ``dem.burst.pool``: ``make(tasks)`` opens its
+    """(tag, make) of one path's staircase for ``dem.pool``: ``make(tasks)`` opens its
     journal and gives the generator of its runs (``staircase_runs``)."""
     log = (lambda m: _log(f"R={ratio:g} f={fraction:g} {m}")) if verbose else None
     return ((ratio, fraction),
@@ -108,8 +108,8 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     path (``staircase``: its start relaxed at fixed strain, then G held by steps from rest until
     a hold of +dc fails; the below and past runs, the kinematic probes), spread over
     ``workers`` local processes or a dask cluster at ``scheduler`` (one thread each; ``threads``
-    in a single process): each path's task an independent run, then every run of the rest
-    searches a task (``dem.burst.pool``: the holds of each staircase one after another, its
+    in a single process): each path then its staircase one chain of runs
+    (``dem.pool``: the holds of each staircase one after another, its
     probes, the loaded peak's relaxation, the below run and the baselines on the other workers
     as soon as their states exist; the files the same bytes as on one worker, which runs them
     in this process one after another, the probes after the staircase). Every finished path
@@ -121,9 +121,34 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     rows as dicts, summary dict). States of parameters outside the granular regime at the test's
     sigma2 (``dem.regime.check_biaxial_regime``) are refused unless ``allow_soft``; summary.json
     records the regime (``regime``)."""
+    from ..pool import run_jobs
+    jobs, finish = burst_job(biaxial_dir, out_dir, ratios, fractions, opts, verbose,
+                             params_file, resume, allow_soft)
+    if stage:
+        stage.at("dem burst: the paths and their rest search (from rest, G held by steps)")
+    # a run in a pool of processes runs on one thread; alone in this process, on ``threads``
+    # (None: common.threads chooses), and so does a chain alone on local processes
+    chain = threads if threads is not None else (None if len(jobs) == 1 and not scheduler
+                                                 else 1)
+    return finish(run_jobs(jobs, workers, scheduler, threads, chain))
+
+
+def _path_run(state, ratio, fraction, opts, verbose, threads=None):
+    """A proportional path, a run of ``dem.pool`` (the first of its staircase's chain)."""
+    return _path_task((state, ratio, fraction, opts, threads, verbose))
+
+
+def burst_job(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = BurstOptions(),
+              verbose=True, params_file=None, resume=False, allow_soft=False):
+    """``run_burst`` in two: the checks, the checkpoint and the parameters' file now, then
+    ``(jobs, finish)``: ``jobs`` [(tag, make)] one generator of runs per path for
+    ``dem.pool`` (the path, unless a resume has it, then its staircase, ``staircase_runs``),
+    ``finish(results)`` the files, the figures and the anatomy from {tag: staircase result};
+    ``finish`` returns what ``run_burst`` does. The cross-check runs the jobs beside the
+    DEM's directional analysis on one pool."""
     from .. import io
     from common.io import atomic_write_bytes
-    from ..probes import _map
+    from ..pool import Call
     ratios = [check_ratio(float(r)) for r in ratios]
     # the options by the command line's rule: their ranges, then the rule of the sample's size,
     # both before the states load
@@ -145,10 +170,6 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
         os.replace(ck, ck[:-len(".jsonl")] + ".previous.jsonl")
     atomic_write_bytes(ck, "".join(json.dumps(r) + "\n" for r in [header] + done).encode())
     combos = [(r, f, st) for r in ratios for f, st, _ in starts]
-    # a run in a pool of processes runs on one thread; alone in this process, on ``threads``
-    # (None: common.threads chooses)
-    per_run = lambda tasks: (threads if threads is not None or (workers == 1 and not scheduler)
-                             or len(tasks) == 1 else 1)
     log = _log if verbose else (lambda m: None)
     log(f"{len(combos)} proportional paths ({params.n} disks, rate {opts.rate:g}/s): R in "
         f"{ratios}, start fractions {list(fractions)}; then from rest (the start relaxed at "
@@ -164,129 +185,123 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
                                 rec["confirmed_by"], grid, rec["steps"], rec["wall_time"])
     if done:
         log(f"resumed from {ck}: {len(paths)} paths finished")
-    if stage:
-        stage.at("dem burst: the proportional paths")
 
-    def got_path(key, res):
-        r, f = key
-        for i, (_, st) in enumerate(res.grid):
-            io.save_state(os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz"), st)
-        with open(ck, "a") as fh:
-            fh.write(json.dumps({"kind": "path", "ratio": r, "start_fraction": f,
-                                 "rows": res.rows.tolist(), "peak": res.peak,
-                                 "confirmed_by": res.confirmed_by,
-                                 "grid": [row for row, _ in res.grid], "steps": res.steps,
-                                 "wall_time": res.wall_time}) + "\n")
-        paths[key] = res
-        pk = (f"loaded c peak {res.rows[res.peak, 8] / 1e3:.2f} kPa at eta "
-              f"{res.rows[res.peak, 7]:.4f} (confirmed by {res.confirmed_by})"
-              if res.peak is not None else "the specimen unloaded"
-              if res.confirmed_by == "unloaded" else "no c peak")
-        log(f"R={r:g} f={f:g} path: {pk}, {res.steps} steps, {res.wall_time:.0f} s")
+    def got_path(key):
+        def record(res):
+            r, f = key
+            for i, (_, st) in enumerate(res.grid):
+                io.save_state(os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz"), st)
+            with open(ck, "a") as fh:
+                fh.write(json.dumps({"kind": "path", "ratio": r, "start_fraction": f,
+                                     "rows": res.rows.tolist(), "peak": res.peak,
+                                     "confirmed_by": res.confirmed_by,
+                                     "grid": [row for row, _ in res.grid], "steps": res.steps,
+                                     "wall_time": res.wall_time}) + "\n")
+            paths[key] = res
+            pk = (f"loaded c peak {res.rows[res.peak, 8] / 1e3:.2f} kPa at eta "
+                  f"{res.rows[res.peak, 7]:.4f} (confirmed by {res.confirmed_by})"
+                  if res.peak is not None else "the specimen unloaded"
+                  if res.confirmed_by == "unloaded" else "no c peak")
+            log(f"R={r:g} f={f:g} path: {pk}, {res.steps} steps, {res.wall_time:.0f} s")
+        return record
 
-    todo = [(r, f, st) for r, f, st in combos if (r, f) not in paths]
-    _map([((r, f), (st, r, f, opts, per_run(todo), verbose)) for r, f, st in todo],
-         got_path, workers, scheduler, fn=_path_task)
-    if stage:
-        stage.at("dem burst: the rest search (from rest, G held by steps)")
-    jobs = [_stairs_job(paths[(r, f)], r, f, opts, verbose,
-                        os.path.join(out_dir, "rest", _base(r, f)), resume)
-            for r, f, _ in combos if paths[(r, f)].confirmed_by != "unloaded"]
+    def job(r, f, st):
+        def make(tasks):
+            if (r, f) not in paths:
+                yield Call(_path_run, (st, r, f, opts, verbose), {}, got_path((r, f)))
+            if paths[(r, f)].confirmed_by == "unloaded":
+                return None
+            _, inner = _stairs_job(paths[(r, f)], r, f, opts, verbose,
+                                   os.path.join(out_dir, "rest", _base(r, f)), resume)
+            res = yield from inner(tasks)
+            stairs[(r, f)] = res
+            log(f"R={r:g} f={f:g}: {res.end}, {len(res.holds)} holds, {res.wall_time:.0f} s")
+            return res
+        return (r, f), make
 
-    def got_stairs(key, res):
-        stairs[key] = res
-        log(f"R={key[0]:g} f={key[1]:g}: {res.end}, {len(res.holds)} holds, "
-            f"{res.wall_time:.0f} s")
+    def finish(results):
+        # {tag: the staircase} of every path that loaded (the jobs' results; also kept as they
+        # ended, in ``stairs``)
+        stairs.update({k: v for k, v in results.items() if v is not None})
+        rows = []
+        for r, f, st in combos:
+            if (r, f) not in stairs:
+                continue
+            for sw, i in sorted(stairs[(r, f)].switches.items(),
+                                key=lambda x: SWITCHES.index(x[0])):
+                rows.append(burst_row(r, f, sw, paths[(r, f)], stairs[(r, f)], i, opts,
+                                      eta_peak, params.n))
+        summary = {"biaxial": os.path.abspath(biaxial_dir), "n_disks": params.n,
+                   "drained_eta_peak": eta_peak, "ratios": ratios,
+                   "start_fractions": list(fractions),
+                   "options": opts._asdict(), "params": params.to_dict(), "dt": params.dt,
+                   "fingerprints": header["fingerprints"],
+                   "paths": [{"ratio": r, "start_fraction": f, "steps": paths[(r, f)].steps,
+                              "wall_time": paths[(r, f)].wall_time,
+                              "end": (paths[(r, f)].confirmed_by or "path_strain reached"),
+                              "rest_search": stairs[(r, f)].end if (r, f) in stairs else None,
+                              "holds": len(stairs[(r, f)].holds) if (r, f) in stairs else 0,
+                              "rest_search_wall_time": stairs[(r, f)].wall_time
+                              if (r, f) in stairs else None,
+                              # the kinematic probes and the theory's verdict (``theory_verdict``)
+                              "theory": stairs[(r, f)].verdict if (r, f) in stairs else {},
+                              "k_path": [{"key": p.key, "c": p.c_before, "eps1": p.eps1_before,
+                                          "k_path": p.k_path, "outcome": p.outcome}
+                                         for p in stairs[(r, f)].probes.values()]
+                              if (r, f) in stairs else []} for r, f, _ in combos],
+                   "runs": [{k: row[k] for k in ("ratio", "start_fraction", "switch", "outcome",
+                                                 "steps", "ke_w2ext_max", "t_release", "released",
+                                                 "ke_end_over_bound", "k_path_switch",
+                                                 "n_unstable_max", "unstable_noise_max",
+                                                 "n_unstable_excess")} for row in rows],
+                   "growth_rule": {"release": RELEASE, "measure": "(E_c - E_c(0)) / W2_ext of the "
+                                   "held step, backbone E_c (hmodel.burst_rule.energy_release)"},
+                   "regime": regime, "wall_time": time.time() - t0}
+        write_burst_files(out_dir, combos, paths, stairs, rows, summary)
+        # the states the switches started from stay (rest/R.._f.._switch.npz); the rest served the
+        # search and a resume
+        from ..anatomy import plot_anatomy, write_anatomy_vtk
+        from ..io import save_state
+        panels = []
+        for r, f, _ in combos:
+            j = _Journal(os.path.join(out_dir, "rest", _base(r, f)), resume=True)
+            keep = {}
+            if (r, f) in stairs:
+                res = stairs[(r, f)]
+                keep = {sw: j.state(res.starts[i]) for sw, i in res.switches.items()}
+                # the anatomy at the onset of a burst (if it came) and at the end of every switch's
+                # run: VTU for ParaView, and the first path's figure, below beside past
+                for sw in SWITCHES:
+                    if sw not in res.switches:
+                        continue
+                    i = res.switches[sw]
+                    s0 = contact_state(Simulation(keep[sw]))
+                    for when in ("onset", "end"):
+                        if j.has(f"h{i}_{when}"):
+                            sim = Simulation(j.state(f"h{i}_{when}"))
+                            sp = (contact_state(Simulation(j.state(f"h{i}_{when}_prev")))
+                                  if j.has(f"h{i}_{when}_prev") else None)
+                            write_anatomy_vtk(os.path.join(out_dir, "anatomy"),
+                                              f"{_base(r, f)}_{sw}_{when}", sim, s0, sp)
+                            if (r, f) == (combos[0][0], combos[0][1]):
+                                t = (sim.step - keep[sw].step) * sim.dt
+                                row = next(x for x in rows if x["switch"] == sw and
+                                           (x["ratio"], x["start_fraction"]) == (r, f))
+                                panels.append((f"{sw}: {res.holds[i][3].outcome}, at the {when} "
+                                               f"(t = {t:.3g} s)\nheld with no change of load: "
+                                               f"<= {row['unstable_noise_max']:.0f} unstable",
+                                               sim, s0, sp))
+            for path in j.files() + [os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz")
+                                     for i in range(2)]:
+                if os.path.exists(path):
+                    os.unlink(path)
+            for sw, st in keep.items():
+                save_state(os.path.join(out_dir, "rest", f"{_base(r, f)}_{sw}.npz"), st)
+        if panels:
+            plot_anatomy(os.path.join(out_dir, "fig_burst_anatomy.png"), panels)
+        return rows, summary
 
-    # one worker: each staircase here, its runs one after another (its probes at its end); more:
-    # every run of every staircase a task of the pool, the probes, the below run and the
-    # baselines beside the staircases (``dem.burst.pool``)
-    if scheduler or (workers or os.cpu_count() or 1) > 1:
-        from .pool import run_pool
-        chain = threads if threads is not None else (None if len(jobs) == 1 and not scheduler
-                                                     else 1)
-        done = run_pool(jobs, workers, scheduler, chain_threads=chain) if jobs else {}
-        for key, _ in jobs:
-            got_stairs(key, done[key])
-    else:
-        from .pool import run_inline
-        for key, make in jobs:
-            got_stairs(key, run_inline(make, threads))
-    rows = []
-    for r, f, st in combos:
-        if (r, f) not in stairs:
-            continue
-        for sw, i in sorted(stairs[(r, f)].switches.items(), key=lambda x: SWITCHES.index(x[0])):
-            rows.append(burst_row(r, f, sw, paths[(r, f)], stairs[(r, f)], i, opts, eta_peak,
-                                  params.n))
-    summary = {"biaxial": os.path.abspath(biaxial_dir), "n_disks": params.n,
-               "drained_eta_peak": eta_peak, "ratios": ratios, "start_fractions": list(fractions),
-               "options": opts._asdict(), "params": params.to_dict(), "dt": params.dt,
-               "fingerprints": header["fingerprints"],
-               "paths": [{"ratio": r, "start_fraction": f, "steps": paths[(r, f)].steps,
-                          "wall_time": paths[(r, f)].wall_time,
-                          "end": (paths[(r, f)].confirmed_by or "path_strain reached"),
-                          "rest_search": stairs[(r, f)].end if (r, f) in stairs else None,
-                          "holds": len(stairs[(r, f)].holds) if (r, f) in stairs else 0,
-                          "rest_search_wall_time": stairs[(r, f)].wall_time
-                          if (r, f) in stairs else None,
-                          # the kinematic probes and the theory's verdict (``theory_verdict``)
-                          "theory": stairs[(r, f)].verdict if (r, f) in stairs else {},
-                          "k_path": [{"key": p.key, "c": p.c_before, "eps1": p.eps1_before,
-                                      "k_path": p.k_path, "outcome": p.outcome}
-                                     for p in stairs[(r, f)].probes.values()]
-                          if (r, f) in stairs else []} for r, f, _ in combos],
-               "runs": [{k: row[k] for k in ("ratio", "start_fraction", "switch", "outcome",
-                                             "steps", "ke_w2ext_max", "t_release", "released",
-                                             "ke_end_over_bound", "k_path_switch",
-                                             "n_unstable_max", "unstable_noise_max",
-                                             "n_unstable_excess")} for row in rows],
-               "growth_rule": {"release": RELEASE, "measure": "(E_c - E_c(0)) / W2_ext of the "
-                               "held step, backbone E_c (hmodel.burst_rule.energy_release)"},
-               "regime": regime, "wall_time": time.time() - t0}
-    write_burst_files(out_dir, combos, paths, stairs, rows, summary)
-    # the states the switches started from stay (rest/R.._f.._switch.npz); the rest served the
-    # search and a resume
-    from ..anatomy import plot_anatomy, write_anatomy_vtk
-    from ..io import save_state
-    panels = []
-    for r, f, _ in combos:
-        j = _Journal(os.path.join(out_dir, "rest", _base(r, f)), resume=True)
-        keep = {}
-        if (r, f) in stairs:
-            res = stairs[(r, f)]
-            keep = {sw: j.state(res.starts[i]) for sw, i in res.switches.items()}
-            # the anatomy at the onset of a burst (if it came) and at the end of every switch's
-            # run: VTU for ParaView, and the first path's figure, below beside past
-            for sw in SWITCHES:
-                if sw not in res.switches:
-                    continue
-                i = res.switches[sw]
-                s0 = contact_state(Simulation(keep[sw]))
-                for when in ("onset", "end"):
-                    if j.has(f"h{i}_{when}"):
-                        sim = Simulation(j.state(f"h{i}_{when}"))
-                        sp = (contact_state(Simulation(j.state(f"h{i}_{when}_prev")))
-                              if j.has(f"h{i}_{when}_prev") else None)
-                        write_anatomy_vtk(os.path.join(out_dir, "anatomy"),
-                                          f"{_base(r, f)}_{sw}_{when}", sim, s0, sp)
-                        if (r, f) == (combos[0][0], combos[0][1]):
-                            t = (sim.step - keep[sw].step) * sim.dt
-                            row = next(x for x in rows if x["switch"] == sw and
-                                       (x["ratio"], x["start_fraction"]) == (r, f))
-                            panels.append((f"{sw}: {res.holds[i][3].outcome}, at the {when} "
-                                           f"(t = {t:.3g} s)\nheld with no change of load: "
-                                           f"<= {row['unstable_noise_max']:.0f} unstable",
-                                           sim, s0, sp))
-        for path in j.files() + [os.path.join(out_dir, "rest", f"{_base(r, f)}_path{i}.npz")
-                                 for i in range(2)]:
-            if os.path.exists(path):
-                os.unlink(path)
-        for sw, st in keep.items():
-            save_state(os.path.join(out_dir, "rest", f"{_base(r, f)}_{sw}.npz"), st)
-    if panels:
-        plot_anatomy(os.path.join(out_dir, "fig_burst_anatomy.png"), panels)
-    return rows, summary
+    return [job(r, f, st) for r, f, st in combos], finish
 
 
 def _base(ratio, fraction):

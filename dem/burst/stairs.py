@@ -8,7 +8,7 @@ import time
 from typing import NamedTuple
 
 from .journal import _Journal
-from .pool import WAIT, Call
+from ..pool import WAIT, Call
 from .options import SWITCHES, BurstOptions
 from .runs import PathResult, hold, path_probe, probe_rate_of, relax
 from .theory import staircase_verdict
@@ -55,14 +55,14 @@ def staircase(path: PathResult, ratio: float, opts: BurstOptions = BurstOptions(
     (``staircase_verdict``). ``journal``: a ``_Journal`` that records every relaxation, hold and
     probe as it finishes (and gives them back on a resume). Every run here, one after another
     on ``threads``; ``run_burst`` on several workers runs the same staircase with its probes,
-    the below run and the baselines beside it (``staircase_runs``, ``dem.burst.pool``)."""
-    from .pool import run_inline
+    the below run and the baselines beside it (``staircase_runs``, ``dem.pool``)."""
+    from ..pool import run_inline
     return run_inline(lambda tasks: staircase_runs(path, ratio, opts, log, journal, tasks),
                       threads)
 
 
 def staircase_runs(path: PathResult, ratio: float, opts: BurstOptions, log, journal, tasks):
-    """``staircase`` as a generator of runs (``dem.burst.pool``): ``yield Call(...)`` for a run
+    """``staircase`` as a generator of runs (``dem.pool``): ``yield Call(...)`` for a run
     of the chain (the relaxation of the start, each hold of the staircase: the next one needs
     its result), ``tasks.start(...)`` for a run that needs only a state already there (the
     relaxation of the loaded peak when the path has one, the below run and the baselines, the

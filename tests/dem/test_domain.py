@@ -194,9 +194,18 @@ def test_the_cluster_estimate_replays_a_burst():
                      2: ("below", "equilibrium", 6), 3: ("baseline_past", "equilibrium", 3)},
            "probes": {k: 4 for k in ("relaxed_start", "relaxed_peak", "h0_end", "h2_end",
                                      "h3_end")}}
-    assert m.replay_burst([run], 1) == (7, 30 + 5 + 9 + 20)
-    # two workers: the chain on one (0-30), beside it the peak's relaxation (0-5) and the probes
-    # as their states come (5-9, 10-14, 20-24); then the below run and the baseline (30-36,
-    # 30-33) and the probes of their ends (33-37, 36-40)
-    assert m.replay_burst([run], 2) == (7, 40)
-    assert m.replay_burst([run], 8) == (7, 40)
+    assert m.replay_pool([run], None, 1) == 7 + 30 + 5 + 9 + 20
+    # two workers: the path, then the chain on one (7-37), beside it the peak's relaxation
+    # (7-12) and the probes as their states come (12-16, 17-21, 27-31); then the below run and
+    # the baseline (37-43, 37-40) and the probes of their ends (40-44, 43-47)
+    assert m.replay_pool([run], None, 2) == 47
+    assert m.replay_pool([run], None, 8) == 47
+    # with the cross-check's domain on the same pool (two relaxations of 6, then two elastic
+    # runs of 4, then two sliding runs of 5): one after the other 15 + 47 steps on two workers;
+    # on one pool the domain's runs take the worker the chain leaves: 51 (worked by hand, the
+    # runs as dem.pool hands them out: the domain's first asked, the runs that start others
+    # first, then first asked, first run)
+    waves = ([6, 6], [4, 4], [5, 5])
+    assert m.replay_pool([run], waves, 1) == 71 + 30
+    assert sum(m.makespan(w, 2) for w in waves) == 15
+    assert m.replay_pool([run], waves, 2) == 51

@@ -1,4 +1,7 @@
-"""The runs of the burst's staircases over a pool (``dem.burst``): a staircase is written as a
+"""The DEM's runs over a pool of workers: the burst's staircases (``dem.burst``), the
+directional analysis of saved states (``dem.probes``, ``dem.domain``), and the cross-check's DEM
+stages together (``crosscheck.run``), each a generator of runs, all served by one set of
+workers. A staircase is written as a
 generator (``stairs.staircase_runs``) that asks for the runs of its chain one after another
 (``yield Call(...)``: a relaxation, a hold of the staircase, whose result it waits for), starts
 the runs that only need a state it already has beside it (``tasks.start(...)``: the relaxation
@@ -28,6 +31,9 @@ from __future__ import annotations
 import heapq
 import os
 from typing import Any, Callable, NamedTuple
+
+
+NEEDS_DASK = "--scheduler needs dask.distributed (pip install 'granular-w2[distributed]')"
 
 
 class Call(NamedTuple):
@@ -119,7 +125,6 @@ class _Dask:
         try:
             from dask.distributed import Client
         except ImportError as e:
-            from ..probes import NEEDS_DASK
             raise RuntimeError(NEEDS_DASK) from e
         self.client = Client(scheduler)
         self.slots = max(1, sum(self.client.nthreads().values()))
@@ -161,6 +166,16 @@ class _PoolTasks:
 
     def start(self, fn, args, kwargs, done, first=False):
         self._start(self._owner, fn, args, kwargs, done, first)
+
+
+def run_jobs(jobs, workers=None, scheduler=None, threads=None, chain_threads=None) -> dict:
+    """The generators of ``jobs`` ([(tag, make)]): on one local worker (``workers`` 1, no
+    ``scheduler``) each in this process, one after another (``run_inline``, every run on
+    ``threads``); otherwise together over the pool (``run_pool``: the chains' runs on
+    ``chain_threads``, the others on one thread). Returns {tag: the generator's result}."""
+    if scheduler or (workers or os.cpu_count() or 1) > 1:
+        return run_pool(jobs, workers, scheduler, None, chain_threads) if jobs else {}
+    return {tag: run_inline(make, threads) for tag, make in jobs}
 
 
 def run_pool(jobs, workers=None, scheduler=None, threads=None, chain_threads=None) -> dict:

@@ -34,9 +34,11 @@ def build_parser() -> opt.Parser:
     add(x, "--seed", 1, note="of the DEM sample")
     add(x, "--rate", default_text="0.05, 0.01 with --full", note="of the DEM's biaxial test")
     add(x, "--max-steps", default_text="the probes'", note="of each DEM probe run")
-    add(x, "--workers", default_text="the cores", note="for the DEM's relaxations and probes")
+    add(x, "--workers", default_text="the cores",
+        note="for the DEM's runs after its biaxial test: its relaxations, probes and burst, one "
+             "pool")
     add(x, "--scheduler", default_text="none (local processes)",
-        note="for the DEM's relaxations and probes (one task a run)")
+        note="for the DEM's runs after its biaxial test (one task a run)")
     add(x, "--no-dem")
     add(x, "--no-domain")
     add(x, "--threads", default_text="auto (common.threads)",

@@ -2,8 +2,9 @@
 test (the relaxations and probe runs of its domain, the burst's path, staircase and probes) run
 on one pool of workers, the burst's staircase first. What this may change is when a run runs,
 never what it gives: every file of a small run (300 disks, two probe directions, the burst
-from rest) is the same bits as the run with the stages one after the other, but for the
-columns and fields that are wall times or this machine's paths. About a minute (two runs)."""
+from rest) on one pool of two workers is the same bits as the run with the stages one after the
+other on one worker, but for the columns and fields that are wall times or this machine's
+paths. About a minute (two runs)."""
 import csv
 import json
 import math
@@ -22,8 +23,8 @@ RUN_FIELDS = {"wall_time", "rest_search_wall_time", "seconds", "time_s", "biaxia
               "solve", "total", "timings", "graph"}
 
 
-def _run(out, graph):
-    return run_crosscheck(out, n=300, rate=0.1, workers=2, fem_mesh=(2, 4), fem_n_dir=72,
+def _run(out, graph, workers):
+    return run_crosscheck(out, n=300, rate=0.1, workers=workers, fem_mesh=(2, 4), fem_n_dir=72,
                           dem_alphas=[0.0, 240.0], dem_domain=False, domain=False, graph=graph,
                           verbose=False)
 
@@ -48,8 +49,9 @@ def _same_json(a, b, where):
 def two_runs(tmp_path_factory):
     seq = tmp_path_factory.mktemp("sequential")
     par = tmp_path_factory.mktemp("graph")
-    _run(seq, False)
-    _run(par, True)
+    # one after the other on one worker (every run in this process), one pool of two workers
+    _run(seq, False, 1)
+    _run(par, True, 2)
     return seq, par
 
 

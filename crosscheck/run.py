@@ -1,6 +1,9 @@
 """The cross-check run: the three parts (``crosscheck.parts``), the burst section
 (``crosscheck.burst``), the conclusions, the figures and the report, written into one folder
-(``python -m crosscheck --out DIR``; docs/crosscheck.md).
+(``python -m crosscheck --out DIR``; docs/crosscheck.md). The stages in this process run one
+after another; the DEM's stages that need only its biaxial test (its domain's relaxations and
+probes, its burst's runs) run as one pool (``dem.pool``), and the stages' graph is read back
+into the report (``critical_path``).
 """
 from __future__ import annotations
 

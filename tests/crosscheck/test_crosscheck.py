@@ -78,22 +78,31 @@ def test_comparison_state_by_its_rule_and_every_probe_decided(xc):
 
 
 def test_dem_runs_on_a_dask_cluster_give_the_same_probes(xc, tmp_path):
-    # `crosscheck --scheduler`: the relaxations and probe runs of the DEM part go to a dask
-    # cluster (here a local one of two workers) and come back the same, to the byte
+    # `crosscheck --scheduler`: the DEM's runs after its biaxial test (its relaxations and probe
+    # runs, the burst's path, staircase and probes: one pool) go to a dask cluster (here a local
+    # one of two workers) and come back the same: the probes to the byte, the burst's files but
+    # their wall-time column
+    import csv
     import shutil
     distributed = pytest.importorskip("distributed")
-    from crosscheck import DEFAULT_SMALL, dem_part
+    from crosscheck import DEFAULT_SMALL
     out, c = xc
     shutil.copytree(out / "dem" / "biaxial", tmp_path / "dem" / "biaxial")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster:
-        d = dem_part(str(tmp_path / "dem"), n=300, rate=0.1, alphas=ALPHAS, resume=True,
-                     max_steps=DEFAULT_SMALL["max_steps"], domain=False,
-                     scheduler=cluster.scheduler_address)
+        d, _ = run_crosscheck(tmp_path, n=300, rate=0.1, fem_mesh=(2, 4), fem_n_dir=72,
+                              dem_alphas=ALPHAS, dem_domain=False, domain=False, resume=True,
+                              dem_max_steps=DEFAULT_SMALL["max_steps"],
+                              scheduler=cluster.scheduler_address, verbose=False)
     name = c["dem"]["state"]["state"]
-    assert d["comparison"]["state"] == name
+    assert d["dem"]["state"]["state"] == name
     probes = "dem/domain/" + name + "/probes.csv"
     assert (tmp_path / probes).read_bytes() == (out / probes).read_bytes()
+    for f in ("stairs.csv", "rest.csv", "burst.csv", "probes.csv"):
+        with open(out / "burst" / "dem" / f) as fa, open(tmp_path / "burst" / "dem" / f) as fb:
+            ra, rb = list(csv.reader(fa)), list(csv.reader(fb))
+        keep = [k for k, col in enumerate(ra[0]) if col != "wall_time"]
+        assert [[r[k] for k in keep] for r in ra] == [[r[k] for k in keep] for r in rb], f
 
 
 def test_instability_cone_in_third_quadrant_in_both_models(xc):

@@ -133,11 +133,6 @@ def eta_lim_text(b):
             f"from {hi:.4f} in others (the limit depends on the direction of the stress path)")
 
 
-def _relax_task(args):
-    state, opts, out_dir, resume = args
-    return reference_state(state, out_dir, opts, resume=resume, verbose=False, threads=1)
-
-
 def load_states(biaxial_dir, names=None, option="--states"):
     """[(name, State, meta)] of ``biaxial_dir/states`` (all, or the listed file names / targets,
     an unknown one refused naming ``option``), and the biaxial peak eta."""
@@ -194,7 +189,7 @@ def run_domain(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions
 
 def _relax_run(state, opts, out_dir, resume, threads=None):
     """A relaxation of a saved state, a task of ``dem.pool`` (one thread, as a probe)."""
-    return _relax_task((state, opts, out_dir, resume))
+    return reference_state(state, out_dir, opts, resume=resume, verbose=False, threads=1)
 
 
 def domain_job(biaxial_dir, out_dir, states=None, alphas=None, opts=ProbeOptions(),

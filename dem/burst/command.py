@@ -80,8 +80,8 @@ def _log(msg):
     print(f"[burst] {msg}", file=sys.stderr, flush=True)
 
 
-def _path_task(args):
-    state, ratio, fraction, opts, threads, verbose = args
+def _path_run(state, ratio, fraction, opts, verbose, threads=None):
+    """A proportional path, a run of ``dem.pool`` (the first of its staircase's chain)."""
     last = [time.time()]
 
     def progress(steps, row, peak):
@@ -131,11 +131,6 @@ def run_burst(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = Burs
     chain = threads if threads is not None else (None if len(jobs) == 1 and not scheduler
                                                  else 1)
     return finish(run_jobs(jobs, workers, scheduler, threads, chain))
-
-
-def _path_run(state, ratio, fraction, opts, verbose, threads=None):
-    """A proportional path, a run of ``dem.pool`` (the first of its staircase's chain)."""
-    return _path_task((state, ratio, fraction, opts, threads, verbose))
 
 
 def burst_job(biaxial_dir, out_dir, ratios, fractions, opts: BurstOptions = BurstOptions(),

@@ -7,7 +7,8 @@ import numpy as np
 from numba import njit
 
 from .common import FAST
-from .step import CHUNK, _block_step, block_partition, blocks_step, cross_forces, cross_pairs
+from .step import (CHUNK, SCRATCH_ROWS, _block_step, block_partition, blocks_step, cross_forces,
+                   cross_pairs)
 from .walls import servo_walls, wall_forces
 
 
@@ -65,7 +66,9 @@ def advance(nsteps, disks, pairs, ws, servo, law, step0, half_skin, nblocks, boo
     cf = np.empty((cross_k.shape[0], 7))
     con = np.empty(cross_k.shape[0], np.bool_)
     dmax = np.zeros(nblocks)
-    sc = np.empty((nblocks, 8, CHUNK))    # pair scratch of each block (_block_step)
+    # each block's pair scratch (_block_step); zeros: without the dashpot its reduced-mass row
+    # is never written, and the law then reads it without using it
+    sc = np.zeros((nblocks, SCRATCH_ROWS * CHUNK))
     ledger = lsc.shape[0] > 0
     nc = cand_off[4] if ledger else 0
     fw = np.zeros((2, nc))                # each wall entry's force and dashpot part

@@ -9,7 +9,14 @@ from .common import FAST, U
 from .contact import _contact_law, _rolling_moment
 from .neighbours import row_offsets
 
-CHUNK = 256     # pairs per chunk of _block_step's three passes (8 rows x 256 x 8 B = 16 kB)
+CHUNK = 256     # pairs per chunk of _block_step's three passes (7 rows x 256 x 8 B = 14 kB)
+# The rows of a block's scratch, flat: row k at k * CHUNK, a constant the compiler folds into
+# the addresses (as a 2-D array's rows, their runtime stride cost registers the pair loops
+# lacked: spilled base pointers reloaded at every pair).  The contact law's results overwrite
+# the rows it consumed: fx in _DX, fy in _DY, f_t in _RS, and for the ledger d_slip in _DVX,
+# d_dash in _DVY.
+_DX, _DY, _RS, _DVX, _DVY, _WR, _MEFF = (k * CHUNK for k in range(7))
+SCRATCH_ROWS = 7
 
 
 @njit(cache=True)
@@ -125,8 +132,8 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
     before, so blocks run concurrently.  Rolling resistance (mur > 0) is a second pass over
     the same pairs, summing the moments into column 3 in the same order; without it neither
     that pass nor that column is touched, and the force loop carries no rolling code (it
-    cost 15 % of its speed inside it).  sc (nblocks, 8, chunk): the block's scratch rows of
-    the chunked contact law (``advance`` allocates it).
+    cost 15 % of its speed inside it).  sc (nblocks, SCRATCH_ROWS * CHUNK): the block's
+    scratch rows of the chunked contact law (``advance`` allocates it).
 
     led (6, N) or (6, 0): the energy ledger's per-disk sums (``dem.ledger``), off when empty
     (then the loops are the ones without it, the same code as before the ledger existed).
@@ -167,49 +174,56 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
     # square roots included), pass 2 adds the forces to the disks in increasing pair index.
     # The operations of every force are the same as in one loop, so are their bits.
     S = sc[b]
-    ch = sc.shape[2]
+    xf = x.reshape(-1)
+    vf = v.reshape(-1)
     c = ci_off[b]
-    for k0 in range(kbounds[b], kbounds[b + 1], ch):
-        nk = min(ch, kbounds[b + 1] - k0)
+    for k0 in range(kbounds[b], kbounds[b + 1], CHUNK):
+        nk = min(CHUNK, kbounds[b + 1] - k0)
         for q in range(nk):
             k = U(k0 + q)
             i = U(pi[k])
             j = U(pj[k])
-            S[0, q] = x[j, 0] - x[i, 0]
-            S[1, q] = x[j, 1] - x[i, 1]
-            S[2, q] = r[i] + r[j]
-            S[3, q] = v[j, 0] - v[i, 0]
-            S[4, q] = v[j, 1] - v[i, 1]
-            S[5, q] = w[i] * r[i] + w[j] * r[j]
-            S[6, q] = ft[k]
-            S[7, q] = m[i] * m[j] / (m[i] + m[j]) if beta > 0.0 else 0.0
+            i2 = i + i
+            j2 = j + j
+            S[_DX + q] = xf[j2] - xf[i2]
+            S[_DY + q] = xf[j2 + U(1)] - xf[i2 + U(1)]
+            S[_RS + q] = r[i] + r[j]
+            S[_DVX + q] = vf[j2] - vf[i2]
+            S[_DVY + q] = vf[j2 + U(1)] - vf[i2 + U(1)]
+            S[_WR + q] = w[i] * r[i] + w[j] * r[j]
+        if beta > 0.0:      # its own loop: a branch inside the gather slows it
+            for q in range(nk):
+                k = U(k0 + q)
+                i = U(pi[k])
+                j = U(pj[k])
+                S[_MEFF + q] = m[i] * m[j] / (m[i] + m[j])
         if ledger and beta > 0.0:   # the same law, its dissipations kept in rows it consumed
             for q in range(nk):
                 _, fx, fy, f_t, d_slip, d_dash = _contact_law(
-                    S[0, q], S[1, q], S[2, q], S[3, q], S[4, q], S[5, q], S[6, q], S[7, q],
-                    kn, kt, mu, cap_on, beta, dt)
-                S[0, q] = fx
-                S[1, q] = fy
-                S[2, q] = f_t
-                S[3, q] = d_slip
-                S[4, q] = d_dash
+                    S[_DX + q], S[_DY + q], S[_RS + q], S[_DVX + q], S[_DVY + q], S[_WR + q],
+                    ft[U(k0 + q)], S[_MEFF + q], kn, kt, mu, cap_on, beta, dt)
+                S[_DX + q] = fx
+                S[_DY + q] = fy
+                S[_RS + q] = f_t
+                S[_DVX + q] = d_slip
+                S[_DVY + q] = d_dash
         elif ledger:
             for q in range(nk):
                 _, fx, fy, f_t, d_slip, _ = _contact_law(
-                    S[0, q], S[1, q], S[2, q], S[3, q], S[4, q], S[5, q], S[6, q], S[7, q],
-                    kn, kt, mu, cap_on, beta, dt)
-                S[0, q] = fx
-                S[1, q] = fy
-                S[2, q] = f_t
-                S[3, q] = d_slip
+                    S[_DX + q], S[_DY + q], S[_RS + q], S[_DVX + q], S[_DVY + q], S[_WR + q],
+                    ft[U(k0 + q)], S[_MEFF + q], kn, kt, mu, cap_on, beta, dt)
+                S[_DX + q] = fx
+                S[_DY + q] = fy
+                S[_RS + q] = f_t
+                S[_DVX + q] = d_slip
         else:
             for q in range(nk):
-                _, fx, fy, f_t, _, _ = _contact_law(S[0, q], S[1, q], S[2, q], S[3, q],
-                                                    S[4, q], S[5, q], S[6, q], S[7, q], kn, kt,
-                                                    mu, cap_on, beta, dt)
-                S[0, q] = fx
-                S[1, q] = fy
-                S[2, q] = f_t
+                _, fx, fy, f_t, _, _ = _contact_law(
+                    S[_DX + q], S[_DY + q], S[_RS + q], S[_DVX + q], S[_DVY + q], S[_WR + q],
+                    ft[U(k0 + q)], S[_MEFF + q], kn, kt, mu, cap_on, beta, dt)
+                S[_DX + q] = fx
+                S[_DY + q] = fy
+                S[_RS + q] = f_t
         for q in range(nk):
             k = U(k0 + q)
             i = U(pi[k])
@@ -226,9 +240,9 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
                         l_dash[i] += cf[c, 5]
                 c += 1
                 continue
-            fx = S[0, q]
-            fy = S[1, q]
-            f_t = S[2, q]
+            fx = S[_DX + q]
+            fy = S[_DY + q]
+            f_t = S[_RS + q]
             ft[k] = f_t
             fnet[i, 0] += fx
             fnet[i, 1] += fy
@@ -238,10 +252,10 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
             fnet[j, 2] += f_t
             if ledger:
                 # most contacts do not slide: a well-predicted branch spares the sum's store
-                if S[3, q] != 0.0:
-                    l_slip[i] += S[3, q]
+                if S[_DVX + q] != 0.0:
+                    l_slip[i] += S[_DVX + q]
                 if beta > 0.0:
-                    l_dash[i] += S[4, q]
+                    l_dash[i] += S[_DVY + q]
     if rolling:
         c = ci_off[b]
         for kk in range(kbounds[b], kbounds[b + 1]):
@@ -267,8 +281,6 @@ def _block_step(b, bounds, kbounds, cross_k, ci_off, cj_off, cj_idx, cf, con,
     # The leapfrog on flat views with the new v, w, x kept in locals: written so, the loop
     # vectorizes (measured 7.1 -> 4.7 ns a disk; the same operations, the same bits)
     ff = fnet.reshape(-1)
-    vf = v.reshape(-1)
-    xf = x.reshape(-1)
     xr = x_ref.reshape(-1)
     if ledger:
         _leapfrog_ledger(p0, p1, ff, fext.reshape(-1), vf, xf, xr, w, theta, r, m, inertia,

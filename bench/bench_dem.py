@@ -73,7 +73,8 @@ def main():
     print(f"machine load before: {os.getloadavg()[0]:.2f} (1-min average), "
           f"{os.cpu_count()} cores")
     print(f"{'n':>6} {'busy core':>9} {'1 thread':>11} {'auto':>11} {'all threads':>11} "
-          f"{'auto/1':>7} {'all/1':>7}  [particle-steps/s, medians of {a.rounds}]")
+          f"{'auto/1':>7} {'all/1':>7} {'ledger':>7}  [particle-steps/s, medians of {a.rounds}; "
+          "ledger: a step's time with the energy ledger over without it]")
     worst = 1e9
     for n in (int(v) for v in a.sizes.split(",")):
         for busy in (False, True):
@@ -83,7 +84,7 @@ def main():
                                r[f"particle_steps_per_s_{k}"])
             worst = min(worst, auto / one)
             print(f"{n:>6} {'yes' if busy else 'no':>9} {one:11.3e} {auto:11.3e} {allt:11.3e} "
-                  f"{auto / one:7.2f} {allt / one:7.2f}", flush=True)
+                  f"{auto / one:7.2f} {allt / one:7.2f} {r['ledger_cost']:7.3f}", flush=True)
     print(f"worst auto / 1 thread: {worst:.2f} (goal: >= 1/1.2 = 0.83)")
     lmp = bench_lammps(a.baseline_n, a.steps, cache_dir=a.cache, rounds=a.rounds)
     if lmp is None:

@@ -67,7 +67,8 @@ report.md), ``figures``, ``command`` (``run_calibration``).
 """
 from .targets import (DECIDE_Z, DILATANCY_STRAIN, FIGURE_TEXT, HMODEL_EPS_MIN,
                       ONE_RUN_SCATTER, PEAK_FRACTION, SCATTER_DISKS, SECANT_STRAIN, TARGETS,
-                      TOLERANCES, compare, curve_figures, dilatancy_ratio, first_run_decides,
+                      TOLERANCES, compare, curve_figures, decided_in_run, dilatancy_ratio,
+                      first_run_decides,
                       hmodel_curve, one_run_scatter, rank, smoothed)
 from .cli import (DEFAULT_VARY, NUMERICAL, bounds_type, calibratable_fields, parse_bounds,
                   parse_seeds, parse_vary, resolve_field, seeds_type, vary_type)
@@ -85,7 +86,7 @@ from .command import run_calibration
 
 __all__ = ["analyse", "bounds_type", "CalibrationOptions", "calibratable_fields", "compare",
            "CSV_FIXED",
-           "current_params", "curve_figures", "DECIDE_Z", "first_run_decides",
+           "current_params", "curve_figures", "DECIDE_Z", "decided_in_run", "first_run_decides",
            "one_run_scatter", "ONE_RUN_SCATTER", "SCATTER_DISKS", "DEFAULT_BOUNDS", "DILATANCY_STRAIN", "dilatancy_ratio", "DEFAULT_VARY", "DENSE_POINTS",
            "dense_points", "FIGURE_COLS", "FIGURE_TEXT", "FigureModel", "FORMAT", "FORMAT_VERSION", "hmodel_curve",
            "HMODEL_EPS_MIN", "identifiability", "initial_design", "LOG_FIELDS", "make_space",

@@ -1,7 +1,8 @@
 """The calibration's targets (``dem.calibrate``): the four figures of a drained biaxial curve
 (peak q, eps1 at PEAK_FRACTION of it, the secant modulus, the dilatancy ratio after eps1_95;
-``curve_figures``), their tolerances and relative errors (``compare``, ``rank``), and the
-H-model's curve they are read from (``hmodel_curve``)."""
+``curve_figures``), their tolerances and relative errors (``compare``, ``rank``), what one run
+decides of a set's mean (``first_run_decides``; and from part of its curve,
+``decided_in_run``), and the H-model's curve they are read from (``hmodel_curve``)."""
 from __future__ import annotations
 
 import math
@@ -59,7 +60,74 @@ def first_run_decides(err: dict, n_seeds: int, n_disks: int) -> list:
             if abs(err[k]) > tol + DECIDE_Z * sig[k] * (1.0 + max(err[k], 0.0)) * shrink]
 
 
+def decided_in_run(eps1, q, target: dict, n_seeds: int, n_disks: int, smooth=0.001):
+    """The first record of a run's curve at which the records so far already decide a target
+    missed by the mean over ``n_seeds`` (``first_run_decides``'s bound), looking at no later
+    record: what an in-run stop of a set's first run could save.  ``target``: the target's
+    figures (``curve_figures``).  What the records up to strain e fix:
+
+    - the secant modulus, exactly, once e >= SECANT_STRAIN (it interpolates between the two
+      records about that strain);
+    - peak q from below: the largest smoothed q over the records whose averaging window lies
+      whole before e (``smoothed``: their values cannot change), and eps1_95 from below: the
+      first strain where those reach PEAK_FRACTION of that bound (a higher final peak is
+      reached later, ``_first_reach``). A figure known from below decides only above its
+      target, where the bound grows with the set's own scale (1 + err): err - tol - c (1 + err)
+      increases with err for c = DECIDE_Z sigma sqrt((n - 1) / n) < 1 (peak q, 0.127 at four
+      seeds), so a bound decided stays decided at the end of the run, and for c >= 1 (eps1_95,
+      1.25) nothing above the target decides;
+    - nothing of the dilatancy ratio (it is read after the final eps1_95) nor of peak q or
+      eps1_95 from above (the peak may still come).
+
+    Returns None, or {"index": i, "eps1": eps1[i], "figures": [...]} (the figures decided
+    there).  The figures a full run's ``first_run_decides`` gives include them. The search
+    does not stop runs so (docs/dem.md, "A first run is not stopped when it has decided": the
+    model of the figures needs the rest of the curve); ``bench/calibration_stop.py`` replays a
+    calibration with it."""
+    e = np.asarray(eps1, float)
+    q = np.asarray(q, float)
+    qs = smoothed(e, q, smooth)     # a value whose window lies whole before e[i] is final at i
+    half = _half(smooth) if smooth > 0 and len(q) >= 3 else 0.0
+    zero = {k: 0.0 for k in TOLERANCES}
+    best = -np.inf
+    k_done = 0
+    for i in range(len(e)):
+        err = {}
+        if e[i] >= SECANT_STRAIN:
+            sec = (float(np.interp(SECANT_STRAIN, e[:i + 1], q[:i + 1])) - q[0]) / (
+                SECANT_STRAIN - e[0])
+            err["secant"] = sec / target["secant"] - 1.0
+        k = int(np.searchsorted(e, e[i] - half, side="right"))   # records with final values
+        if k > k_done:
+            best = max(best, float(np.max(qs[k_done:k])))
+            k_done = k
+        if k_done:
+            up = {"peak_q": best / target["peak_q"] - 1.0,
+                  "eps1_95": _first_reach(e[:k_done], qs[:k_done], PEAK_FRACTION * best)
+                  / target["eps1_95"] - 1.0}
+            err.update({f: v for f, v in up.items() if v > 0.0})
+        figs = [f for f in first_run_decides({**zero, **err}, n_seeds, n_disks) if f in err]
+        if figs:
+            return {"index": i, "eps1": float(e[i]), "figures": figs}
+    return None
+
+
 # -- the four figures of a curve -----------------------------------------------------------------
+def _half(window):
+    """Half the moving average's window (``smoothed``): records on its edges count on both
+    sides."""
+    return 0.5 * window * (1 + 1e-6)
+
+
+def _first_reach(e, qs, level):
+    """The first strain where the smoothed curve ``qs`` reaches ``level``, linear between the
+    records (the first record when it starts there); ``level`` <= max(qs)."""
+    j = int(np.argmax(qs >= level))             # first record at the level
+    if j == 0:
+        return float(e[0])
+    return float(e[j - 1] + (level - qs[j - 1]) / (qs[j] - qs[j - 1]) * (e[j] - e[j - 1]))
+
+
 def smoothed(eps1, q, window):
     """q averaged over eps1 in [e - window/2, e + window/2] at every point (window 0: q)."""
     e = np.asarray(eps1, float)
@@ -67,7 +135,7 @@ def smoothed(eps1, q, window):
     if window <= 0 or len(q) < 3:
         return q.copy()
     c = np.concatenate([[0.0], np.cumsum(q)])
-    half = 0.5 * window * (1 + 1e-6)       # points on the window's edges count on both sides
+    half = _half(window)
     lo = np.searchsorted(e, e - half, side="left")
     hi = np.searchsorted(e, e + half, side="right")
     return (c[hi] - c[lo]) / (hi - lo)
@@ -107,12 +175,7 @@ def curve_figures(eps1, q, smooth=0.001, secant_strain=SECANT_STRAIN, eps_v=None
     qs = smoothed(e, q, smooth)
     i = int(np.argmax(qs))
     sec = (float(np.interp(secant_strain, e, q)) - q[0]) / (secant_strain - e[0])
-    level = PEAK_FRACTION * qs[i]
-    j = int(np.argmax(qs >= level))             # first record at the level (j <= i)
-    if j == 0:
-        e95 = e[0]
-    else:
-        e95 = e[j - 1] + (level - qs[j - 1]) / (qs[j] - qs[j - 1]) * (e[j] - e[j - 1])
+    e95 = _first_reach(e, qs, PEAK_FRACTION * qs[i])
     out = {"peak_q": float(qs[i]), "eps1_peak": float(e[i]), "eps1_95": float(e95),
            "secant": float(sec), "peak_q_raw": float(np.max(q))}
     if eps_v is not None:

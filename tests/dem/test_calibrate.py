@@ -1030,3 +1030,101 @@ def test_a_search_that_ends_on_a_set_decided_on_one_run_completes_its_seeds(tmp_
     best = next(r for r in rows if int(r["index"]) == s["best"]["index"])
     assert int(best["runs"]) == 4 and best["decided_by"] == ""
     assert s["runs"] == CALLS["n"] == sum(int(r["runs"]) for r in rows) + 1
+
+
+# -- an in-run stop (bench/calibration_stop.py replays a calibration with it) ----------------------
+def _parabola_target():
+    e, q = _parabola()
+    return C.curve_figures(e, q, smooth=0.0)
+
+
+def test_an_in_run_stop_at_the_secant_strain_and_past_the_peak_bound_exactly():
+    """``decided_in_run`` on the parabola q = qp (2x - x^2), x = e / ep, scaled in stress: 1.5 and
+    0.5 times the target's secant are decided at the first record at 0.25 % (the secant exact
+    there, beyond its bound 0.2 + 3 x 0.0324 sqrt(3/4) (1 + err)); 1.25 times it is not (err
+    0.25 < 0.305), but its peak, 1.25 times the target's, is, at the first record where q
+    (smoothing 0: the records themselves) passes the target's peak times 1 + u, u = (0.05 + c) /
+    (1 - c), c = 3 x 0.0487 sqrt(3/4): the bound solved for the set's own scale; the target's
+    own curve and the dilatancy are never decided."""
+    tgt = _parabola_target()
+    e, q = _parabola()
+    at_secant = int(np.argmax(e >= C.SECANT_STRAIN))
+    for scale in (1.5, 0.5):
+        r = C.decided_in_run(e, scale * q, tgt, 4, 2000, smooth=0.0)
+        assert r == {"index": at_secant, "eps1": e[at_secant], "figures": ["secant"]}
+    c = 3.0 * 0.0487 * math.sqrt(0.75)
+    u = (0.05 + c) / (1.0 - c)
+    assert u == pytest.approx(0.20210, abs=1e-5)
+    r = C.decided_in_run(e, 1.25 * q, tgt, 4, 2000, smooth=0.0)
+    assert r["figures"] == ["peak_q"]
+    assert r["index"] == int(np.argmax(1.25 * q / tgt["peak_q"] - 1.0 > u))
+    assert 0.0160 < r["eps1"] < 0.0162               # x > 1 - sqrt(1 - 1.2021 / 1.25)
+    assert C.decided_in_run(e, q, tgt, 4, 2000, smooth=0.001) is None
+    assert C.decided_in_run(e, 1.25 * q, tgt, 1, 2000, smooth=0.0) is None   # one seed
+
+
+def test_an_in_run_stop_looks_at_no_later_record_and_stays_decided():
+    """On 200 seeded noisy curves (the parabola stretched in stress and strain, noise of 2 % of
+    the peak a record, smoothing 1e-3): where ``decided_in_run`` stops, the curve cut at that
+    record stops there too and the curve cut one record before does not stop (it reads no later
+    record: a smoothed value whose window is not whole yet would differ), and the full run's
+    figures decide every figure it named (``first_run_decides``: a bound from below decides
+    only above the target, where the rule grows with the error)."""
+    rng = np.random.default_rng(3)
+    tgt = _parabola_target()
+    e0, q0 = _parabola()
+    kinds = set()
+    for _ in range(200):
+        s = rng.uniform(0.6, 1.8)
+        t = s * rng.uniform(0.85, 1.15) if rng.random() < 0.6 else rng.uniform(0.5, 2.0)
+        e = e0 * t
+        q = s * q0 + 0.02 * 400e3 * rng.standard_normal(len(q0))
+        r = C.decided_in_run(e, q, tgt, 4, 2000, smooth=0.001)
+        if r is None:
+            continue
+        i = r["index"]
+        kinds.update(r["figures"])
+        assert C.decided_in_run(e[:i + 1], q[:i + 1], tgt, 4, 2000, smooth=0.001) == r
+        assert C.decided_in_run(e[:i], q[:i], tgt, 4, 2000, smooth=0.001) is None
+        f = C.curve_figures(e, q, smooth=0.001)
+        err = {k: f[k] / tgt[k] - 1.0 for k in ("peak_q", "eps1_95", "secant")}
+        decided = C.first_run_decides({**err, "dilatancy": 0.0}, 4, 2000)
+        assert set(r["figures"]) <= set(decided), (s, t, r, err)
+    assert kinds == {"secant", "peak_q"}          # both kinds of stop were exercised
+
+
+def test_the_replay_of_a_calibration_with_an_in_run_stop(tmp_path, capsys):
+    """bench/calibration_stop.py on the synthetic 2000-disk calibration: every first run that
+    stops early stops on figures its full run decided; a set that ran on all its seeds never
+    stops; a run stopped at 0.25 % knows its secant only; the counts of the figures the model
+    would still have are printed. Bad DIR: one line naming it, exit 2."""
+    import importlib.util
+    from pathlib import Path
+    _far_and_near(tmp_path / "cal")
+    script = Path(__file__).resolve().parents[2] / "bench" / "calibration_stop.py"
+    spec = importlib.util.spec_from_file_location("calibration_stop", script)
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    head, sets = m.replay(str(tmp_path / "cal"))
+    assert len(sets) == len([r for r in _csv(tmp_path / "cal" / "calibration.csv")
+                             if r["kind"] == "dem"])
+    stopped = [s for s in sets if s["stop"] is not None]
+    assert stopped                                   # far sets stop in this space
+    for s in sets:
+        if s["stop"] is None:
+            assert s["share_saved"] == 0.0 and s["known"] == list(C.TOLERANCES)
+            continue
+        assert set(s["stop"]["figures"]) <= set(s["decided_by"].split("+")) and s["runs"] == 1
+        assert 0.0 < s["share_saved"] < 1.0
+        assert s["known"] == (["secant"] if s["eps1_stop"] >= C.SECANT_STRAIN else [])
+    assert m.main([str(tmp_path / "cal")]) == 0
+    out = capsys.readouterr().out
+    first = [s for s in sets if s["index"] <= head["initial"]]
+    n_peak = sum("peak_q" in s["known"] for s in first)
+    assert f"peak_q: known on {n_peak} of the {len(first)} sets" in out
+    with pytest.raises(SystemExit) as ex:
+        m.main([str(tmp_path / "nothing")])
+    assert ex.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith("allowed a finished `python -m dem calibrate` folder "
+                            "(evaluations.jsonl and calibration.csv)") and "DIR" in err[-1]

@@ -999,35 +999,62 @@ def _in_callback(frame) -> bool:
     return False
 
 
+def _send_again(signum):
+    """The signal ``signum`` to the main thread again in 5 ms (a callback returns in
+    microseconds, so its exception is then raised in the run's own code)."""
+    again = threading.Timer(0.005, signal.pthread_kill, (threading.main_thread().ident, signum))
+    again.daemon = True
+    again.start()
+
+
 def _interrupt_handler(exc_type):
     """A signal handler raising ``exc_type`` in the main thread, or, if the signal lands where
     the exception would be lost or mangled (``_in_callback``), sending the signal again 5 ms
-    later (such a callback returns in microseconds, so the exception is raised in the run's
-    own code)."""
+    later (``_send_again``). The exception carries the signal (``signum``): where it is lost
+    all the same, in a callback ``_in_callback`` does not know (any weakref callback, e.g. a
+    WeakValueDictionary's, which the garbage collector calls from C), Python hands it to
+    ``sys.unraisablehook``, and ``_unraisable_hook`` sends the signal again."""
     def handler(signum, frame):
         if _in_callback(frame):
-            again = threading.Timer(0.005, signal.pthread_kill,
-                                    (threading.main_thread().ident, signum))
-            again.daemon = True
-            again.start()
+            _send_again(signum)
             return
-        raise exc_type()
+        e = exc_type()
+        e.signum = signum
+        raise e
     return handler
+
+
+def _unraisable_hook(previous):
+    """``sys.unraisablehook`` for the run: an exception of the interrupt handler that Python
+    could not raise (it came inside a callback called from C: "Exception ignored in ...") is
+    not printed but its signal sent again (``_send_again``), so the run still stops; anything
+    else goes to ``previous``."""
+    def hook(u):
+        signum = getattr(u.exc_value, "signum", None)
+        if isinstance(u.exc_value, (Terminated, KeyboardInterrupt)) and signum is not None:
+            _send_again(signum)
+            return
+        previous(u)
+    return hook
 
 
 @contextmanager
 def _sigterm_raises():
     """SIGTERM raises Terminated and SIGINT KeyboardInterrupt (unless SIGINT is ignored), never
-    inside a finaliser or a callback of compiled code (see ``_in_callback``)."""
+    inside a finaliser or a callback of compiled code (see ``_in_callback``), and never lost in
+    a callback called from C (``_unraisable_hook``)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     old = {signal.SIGTERM: signal.signal(signal.SIGTERM, _interrupt_handler(Terminated))}
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         old[signal.SIGINT] = signal.signal(signal.SIGINT, _interrupt_handler(KeyboardInterrupt))
+    old_hook = sys.unraisablehook
+    sys.unraisablehook = _unraisable_hook(old_hook)
     try:
         yield
     finally:
+        sys.unraisablehook = old_hook
         for signum, handler in old.items():
             signal.signal(signum, handler)
 

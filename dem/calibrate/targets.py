@@ -91,12 +91,13 @@ def decided_in_run(eps1, q, target: dict, n_seeds: int, n_disks: int, smooth=0.0
     zero = {k: 0.0 for k in TOLERANCES}
     best = -np.inf
     k_done = 0
+    sec_err = None
     for i in range(len(e)):
         err = {}
         if e[i] >= SECANT_STRAIN:
-            sec = (float(np.interp(SECANT_STRAIN, e[:i + 1], q[:i + 1])) - q[0]) / (
-                SECANT_STRAIN - e[0])
-            err["secant"] = sec / target["secant"] - 1.0
+            if sec_err is None:     # fixed from the first record past the secant strain on
+                sec_err = _secant(e[:i + 1], q[:i + 1]) / target["secant"] - 1.0
+            err["secant"] = sec_err
         k = int(np.searchsorted(e, e[i] - half, side="right"))   # records with final values
         if k > k_done:
             best = max(best, float(np.max(qs[k_done:k])))
@@ -126,6 +127,12 @@ def _first_reach(e, qs, level):
     if j == 0:
         return float(e[0])
     return float(e[j - 1] + (level - qs[j - 1]) / (qs[j] - qs[j - 1]) * (e[j] - e[j - 1]))
+
+
+def _secant(e, q, secant_strain=SECANT_STRAIN):
+    """(q(secant_strain) - q(0)) / (secant_strain - eps1(0)), q interpolated linearly on the raw
+    curve (``curve_figures``' secant)."""
+    return (float(np.interp(secant_strain, e, q)) - q[0]) / (secant_strain - e[0])
 
 
 def smoothed(eps1, q, window):
@@ -174,7 +181,7 @@ def curve_figures(eps1, q, smooth=0.001, secant_strain=SECANT_STRAIN, eps_v=None
                          f"secant strain {secant_strain:g}")
     qs = smoothed(e, q, smooth)
     i = int(np.argmax(qs))
-    sec = (float(np.interp(secant_strain, e, q)) - q[0]) / (secant_strain - e[0])
+    sec = _secant(e, q, secant_strain)
     e95 = _first_reach(e, qs, PEAK_FRACTION * qs[i])
     out = {"peak_q": float(qs[i]), "eps1_peak": float(e[i]), "eps1_95": float(e95),
            "secant": float(sec), "peak_q_raw": float(np.max(q))}

@@ -12,6 +12,8 @@ run's wall time times that share: an upper bound, its compaction is not saved), 
 figure, on how many of the sets of the start and the design (what the model of the figures is
 first fitted on) that figure would still be known: a run stopped at 0.25 % knows its secant
 only. The model needs `model_sets_min` sets of each figure (the number of --vary fields + 2).
+(`python -m dem calibrate --stop-decided-runs` runs a calibration with that stop, its model
+taking such figures and running on the stopped sets it lacks: docs/performance.md.)
 
     python bench/calibration_stop.py DIR        # DIR: a `python -m dem calibrate` --out folder
 """

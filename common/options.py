@@ -509,6 +509,10 @@ VOCABULARY = {t.name: t for t in (
     _T("--no-first-run-decision", "every set on every one of --seeds (by default a set whose "
        "first run misses a target by more than the sample's scatter lets the seeds' mean reach "
        "runs on no other seed)", None, "flag"),
+    _T("--stop-decided-runs", "a set's first run stops as soon as its records decide a target "
+       "missed (the secant once past its strain, peak q from below); the model takes its other "
+       "figures as bounds or unknown and runs such a set on to its end where it lacks a figure",
+       None, "flag"),
     _T("--initial", "sets of the space-filling (Sobol) design before the model proposes any (at "
        "least the varied parameters + 2)", "-", "int", fields=("CalibrationOptions.initial",)),
     _T("--batch", "sets the model proposes per round", "-", "int",

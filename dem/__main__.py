@@ -281,7 +281,8 @@ def _calibration_options(a):
                               check_seeds=a.check_seeds, initial=a.initial, batch=a.batch,
                               max_evals=a.max_evals, rate=a.rate, confining=a.sigma2,
                               eps_max=a.eps1_max, post_peak_strain=a.post_peak_strain,
-                              smooth=a.smooth, decide_on_first_run=not a.no_first_run_decision).validate(_params(a))
+                              smooth=a.smooth, decide_on_first_run=not a.no_first_run_decision,
+                              stop_decided_runs=a.stop_decided_runs).validate(_params(a))
 
 
 def cmd_calibrate(a):
@@ -494,6 +495,7 @@ def build_parser() -> opt.Parser:
     add(g, "--seeds", D.seeds, parse=seeds_type)
     add(g, "--check-seeds", D.check_seeds, parse=seeds_type)
     add(g, "--no-first-run-decision")
+    add(g, "--stop-decided-runs")
     ranged(g, "--initial", "initial")
     ranged(g, "--batch", "batch")
     ranged(g, "--max-evals", "max_evals")

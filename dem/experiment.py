@@ -39,6 +39,7 @@ class BiaxialResult(NamedTuple):
     eta_a_reached: bool
     compaction: dict
     wall_time: float
+    stopped: object = None      # what ``stop`` returned where it stopped the run, else None
 
 
 def record(sim: Simulation):
@@ -68,7 +69,7 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
                 eps_max=0.10, post_peak_strain=0.02, record_strain=1e-4,
                 compaction_friction_deg=0.0, checkpoint_every=50, resume=False,
                 verbose=True, figures=True, vtk=True, save_fractions=SAVE_FRACTIONS,
-                save_etas=(), params_note=None, allow_soft=False) -> BiaxialResult:
+                save_etas=(), params_note=None, allow_soft=False, stop=None) -> BiaxialResult:
     """Compact, then run the drained biaxial test past the peak.
 
     Writes out_dir/params.json first (``params``: ``--params out_dir/params.json`` repeats the
@@ -91,6 +92,13 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
     A set outside the granular regime at ``confining`` (``dem.regime.check_regime``) is refused
     before anything is written, unless ``allow_soft``; summary.json records the regime
     (``regime``). A run that reaches an unsound state (``dem.regime.UnsoundState``) stops there.
+
+    ``stop``: None, or a function of the rows so far (lists in COLUMNS' order, the first the
+    start of the test), called after each new one, that returns a true value to stop the test
+    there (the calibration's in-run stop): the run then writes
+    biaxial.csv and its checkpoint at that row and returns with ``stopped`` that value (no
+    path states, summary or figures); ``resume=True`` without ``stop`` continues it to the
+    rows, bit for bit, of a run never stopped.
     """
     for name, val, ok, rng in (("rate", rate, rate > 0, "rate > 0 [1/s]"),
                                ("confining", confining, confining > 0, "confining > 0 [Pa]"),
@@ -181,13 +189,18 @@ def run_biaxial(params: DemParams, out_dir, rate=0.01, confining=200e3, eta_a=1.
             sps = (sim.step - step_loop) * sim.n / max(now - t_loop, 1e-9)
             _progress(f"[biaxial] step {sim.step} eps1={e1:.5f} q={q/1e3:.2f} kPa eta={eta:.4f} "
                       f"eps_v={row[4]:.5f} unbalanced={row[12]:.1e} ({sps:.2e} particle-steps/s)")
-        if checkpoint_every and len(rows) % checkpoint_every == 0 and not done:
+        stopped = None if (done or stop is None) else stop(rows)
+        if stopped or (checkpoint_every and len(rows) % checkpoint_every == 0 and not done):
             # the wall time so far goes with the checkpoint, so a resumed run reports the total
             io.save_state(ck_path, sim.state(), meta=dict(
                 info, rows=rows,
                 wall_time_before=info.get("wall_time_before", 0.0) + time.time() - t_start),
                 arrays=sim.ledger.to_arrays())
             io.write_csv(os.path.join(out_dir, "biaxial.csv"), COLUMNS, rows)
+        if stopped:
+            wall = time.time() - t_start + info.get("wall_time_before", 0.0)
+            return BiaxialResult(rows, None, info["eta_a_reached"], info.get("compaction", {}),
+                                 wall, stopped)
         if done:
             break
     first = lambda ok: min((c for c in cands if ok(c[0]["eta"])), key=lambda c: c[0]["step"],

@@ -288,10 +288,11 @@ def test_every_quantity_has_a_unit_and_every_switch_is_positive_or_no():
     for t in VOCABULARY.values():
         if t.kind in ("real", "reals"):
             assert t.unit, f"{t.name} is a quantity with no unit ('-' if dimensionless)"
-        # --allow-soft, like --force, permits what is refused otherwise (dem.regime)
+        # --allow-soft, like --force, permits what is refused otherwise (dem.regime);
+        # --stop-decided-runs, like --full, turns on what is off by default (dem calibrate)
         if t.kind == "flag" and t.name not in ("--quiet", "--force", "--resume", "--full",
                                                "--busy-core", "--check-tangent",
-                                               "--allow-soft"):
+                                               "--allow-soft", "--stop-decided-runs"):
             assert t.name.startswith("--no-"), f"{t.name}: a negative switch is --no-..."
         assert not t.name.startswith("--skip"), t.name
 

@@ -26,7 +26,11 @@ not fitted on, and the check's verdict is their mean against the targets (``chec
 Four seeds each by default (issue 34): one 2000-disk sample scatters about its set's mean by
 about a tolerance (the calibrated set over 16 seeds: one run's sd 4.9 % in peak q, 48 % in
 eps1_95, 3.2 % in the secant, 3.1 % in the dilatancy ratio), and a mean of four halves that, to
-under half of each tolerance but eps1_95's (docs/dem.md).
+under half of each tolerance but eps1_95's (docs/dem.md). A set whose first run decides a target
+missed by the mean runs on that seed only (``first_run_decides``); with ``stop_decided_runs``
+that run stops as soon as its records decide (``InRunDecision``), its figures then known from
+below or not at all (``stopped_figures``), which the model takes so (``FigureModel``'s
+``censored``, ``model_of``), running on the stopped sets it lacks (``to_complete``).
 
 Search (``surrogate_search``, deterministic): every varied parameter is mapped onto u in [0, 1]
 over its range (``Space``: logarithmic for stiffness-like fields, linear otherwise; values
@@ -67,15 +71,16 @@ report.md), ``figures``, ``command`` (``run_calibration``).
 """
 from .targets import (DECIDE_Z, DILATANCY_STRAIN, FIGURE_TEXT, HMODEL_EPS_MIN,
                       ONE_RUN_SCATTER, PEAK_FRACTION, SCATTER_DISKS, SECANT_STRAIN, TARGETS,
-                      TOLERANCES, compare, curve_figures, decided_in_run, dilatancy_ratio,
-                      first_run_decides,
-                      hmodel_curve, one_run_scatter, rank, smoothed)
+                      TOLERANCES, InRunDecision, compare, curve_figures, decided_in_run,
+                      dilatancy_ratio, first_run_decides, hmodel_curve, one_run_scatter, rank,
+                      score_at_least, smoothed, stopped_figures)
 from .cli import (DEFAULT_VARY, NUMERICAL, bounds_type, calibratable_fields, parse_bounds,
                   parse_seeds, parse_vary, resolve_field, seeds_type, vary_type)
-from .search import (DEFAULT_BOUNDS, DENSE_POINTS, FigureModel, LOG_FIELDS, MARGIN_SIGMAS,
-                     MIN_DISTANCE, SMOOTHINGS, Space, analyse, dense_points, identifiability,
-                     initial_design, make_space, model_sets_min, nearest_distance, space_dim_min,
-                     surrogate_search)
+from .search import (CENSORED, DEFAULT_BOUNDS, DENSE_POINTS, FigureModel, LOG_FIELDS,
+                     MARGIN_SIGMAS, MIN_DISTANCE, SMOOTHINGS, Space, analyse, dense_points,
+                     identifiability, initial_design, make_space, model_of, model_sets_min,
+                     nearest_distance, short_figures, space_dim_min, surrogate_search,
+                     to_complete)
 from .options import CalibrationOptions, RANGES
 from .evaluation import (FORMAT, FORMAT_VERSION, RESUME_FREE, current_params, params_key,
                          read_checkpoint)
@@ -84,7 +89,8 @@ from .report import CSV_FIXED, FIGURE_COLS, RUN_FIXED
 from .figures import SEED_COLORS, START_SHADES, redraw_figures
 from .command import run_calibration
 
-__all__ = ["analyse", "bounds_type", "CalibrationOptions", "calibratable_fields", "compare",
+__all__ = ["analyse", "bounds_type", "CalibrationOptions", "CENSORED", "InRunDecision",
+           "model_of", "score_at_least", "short_figures", "stopped_figures", "to_complete", "calibratable_fields", "compare",
            "CSV_FIXED",
            "current_params", "curve_figures", "DECIDE_Z", "decided_in_run", "first_run_decides",
            "one_run_scatter", "ONE_RUN_SCATTER", "SCATTER_DISKS", "DEFAULT_BOUNDS", "DILATANCY_STRAIN", "dilatancy_ratio", "DEFAULT_VARY", "DENSE_POINTS",

@@ -5,7 +5,6 @@ the figures and the summary."""
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import sys
@@ -16,12 +15,13 @@ import numpy as np
 from common.io import atomic_write_bytes
 
 from ..params import DemParams, record_params, save_params
-from .evaluation import (_check_mean, _combine, _evaluate_task, _header, _log, _past_peak,
+from .evaluation import (STOPPED, _check_mean, _combine, _evaluate_task, _header, _log,
+                         _past_peak, done_key,
                          _sample_scatter, params_key, read_checkpoint)
 from .options import CalibrationOptions
 from .figures import _figure, _score_figure, _search_figure
 from .report import FIGURE_COLS, _report, _spread, _verdict, _write_csv, _write_runs_csv
-from .search import (FigureModel, dense_points, identifiability, make_space, space_dim_min,
+from .search import (dense_points, identifiability, make_space, model_of,
                      surrogate_search)
 from .targets import (DECIDE_Z, DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TOLERANCES,
                       _fmt_figs, _fmt_values, compare, curve_figures, first_run_decides,
@@ -41,7 +41,8 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                     batch=_D.batch, max_evals=_D.max_evals, rate=_D.rate,
                     confining=_D.confining, eps_max=_D.eps_max,
                     post_peak_strain=_D.post_peak_strain, smooth=_D.smooth,
-                    decide_on_first_run=_D.decide_on_first_run, workers=None,
+                    decide_on_first_run=_D.decide_on_first_run,
+                    stop_decided_runs=_D.stop_decided_runs, workers=None,
                     scheduler=None, resume=False, verbose=True, task=None, stage=None,
                     params_note=None, options: CalibrationOptions | None = None,
                     allow_soft=False):
@@ -49,7 +50,10 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     (module docstring), every set on the first of ``seeds`` and on the others where that run
     does not decide it missed (``targets.first_run_decides``; on each without
     ``decide_on_first_run``), the
-    best one then on ``check_seeds``.
+    best one then on ``check_seeds``. ``stop_decided_runs``: a first run (but the start set's)
+    stops as soon as its records decide (``targets.InRunDecision``), its figures then known in
+    part (``search.FigureModel``'s censored values); the search runs such a set on to its end
+    where the model lacks a figure (``search.to_complete``).
     The options of the search and of each test (``vary`` to ``smooth``; ``vary`` None: the
     default --vary) may be given as keywords or as one ``options`` record
     (``CalibrationOptions``), not both; either way ``CalibrationOptions.validate`` checks them
@@ -69,7 +73,8 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     keywords = dict(bounds=bounds, target=target, seeds=seeds, check_seeds=check_seeds,
                     initial=initial, batch=batch, max_evals=max_evals, rate=rate,
                     confining=confining, eps_max=eps_max, post_peak_strain=post_peak_strain,
-                    smooth=smooth, decide_on_first_run=decide_on_first_run)
+                    smooth=smooth, decide_on_first_run=decide_on_first_run,
+                    stop_decided_runs=stop_decided_runs)
     if options is None:
         options = CalibrationOptions(**keywords, **({} if vary is None else {"vary": vary}))
     elif vary is not None or any(v != getattr(_D, k) for k, v in keywords.items()):
@@ -88,6 +93,9 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     regime = check_regime(soft_set, confining, allow_soft, where, "--sigma2")
     header = _header(target, space, base, seeds, initial, batch, max_evals, rate, confining,
                      eps_max, post_peak_strain, smooth)
+    stops = o.stop_decided_runs and o.decide_on_first_run and len(seeds) > 1
+    if stops:       # another search: a checkpoint made without it is not resumed with it
+        header["stop_decided_runs"] = True
     ck = os.path.join(out_dir, "evaluations.jsonl")
     work = os.path.join(out_dir, "work")
     notes = []
@@ -108,7 +116,8 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                   f"({time.time() - th:.1f} s); every set on "
                   + (f"seed {seeds[0]}, and on seeds {','.join(map(str, seeds[1:]))} unless that "
                      "run decides it missed" if o.decide_on_first_run and len(seeds) > 1 else
-                     f"seeds {','.join(map(str, seeds))}"))
+                     f"seeds {','.join(map(str, seeds))}")
+                  + ("; a first run stops once its records decide" if stops else ""))
     # -- from here on, files are written
     from .. import io
     os.makedirs(out_dir, exist_ok=True)
@@ -126,13 +135,16 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         _say(verbose, f"[calibrate] --resume: {len(done)} finished runs in {ck} (not run again)")
     records = []            # in search order
     counts = {"run": 0, "taken": 0}
+    stop_rule = {"target": {k: hfig[k] for k in TOLERANCES}, "n_seeds": len(seeds),
+                 "smooth": smooth}
     sink = open(ck, "a")
     task = task or _evaluate_task
     where = stage
 
-    def run_sets(points, stage, set_seeds, which=None):
+    def run_sets(points, stage, set_seeds, which=None, stop=False):
         """Runs of the points ``which`` (indices into points; default all) on every seed of
-        set_seeds: {(i, seed): result}."""
+        set_seeds: {(i, seed): result}. ``stop``: each run stops once its records decide
+        (``InRunDecision``); otherwise a run stopped so before is run on to its end."""
         got = {}
         tasks = []
         for i, v in enumerate(points):
@@ -141,16 +153,24 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
             for s in set_seeds:
                 d = space.params(base, v).replace(seed=s).to_dict()
                 key = params_key(d)
-                res = done.get(key)
-                if res is None and resume:  # finished in work/ but not logged before the interruption
+                full, cut = done.get(key), done.get(key + STOPPED)
+                if full is None and cut is None and resume:
+                    # finished in work/ but not logged before the interruption
                     try:
                         with open(os.path.join(work, key, "result.json")) as f:
                             res = json.load(f)
                         _log(sink, res)
-                        done[key] = res
-                        shutil.rmtree(os.path.join(work, key), ignore_errors=True)
+                        done[done_key(res)] = res
+                        if res.get("stopped"):
+                            cut = res
+                        else:
+                            full = res
+                            shutil.rmtree(os.path.join(work, key), ignore_errors=True)
                     except (OSError, ValueError):
-                        res = None
+                        pass
+                # a stopped run is what a run allowed to stop gave; one not allowed to goes on
+                res = (cut or full) if stop else full
+                on = not stop and full is None and cut is not None
                 if res is not None:
                     counts["taken"] += 1
                     got[(i, s)] = res
@@ -159,25 +179,31 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                 tasks.append(((i, s), {"key": key, "params": d, "rate": rate,
                                        "confining": confining, "eps_max": eps_max,
                                        "post_peak_strain": post_peak_strain, "work_dir": wd,
-                                       "resume": bool(resume),
+                                       "resume": bool(resume or on),
+                                       "stop": stop_rule if stop else None,
                                        "allow_soft": bool(allow_soft)}))
 
         def collect(tag, res):
             _log(sink, res)
-            done[res["key"]] = res
+            done[done_key(res)] = res
             got[tag] = res
             counts["run"] += 1
             wd = os.path.join(work, res["key"])
-            if os.path.isdir(wd):
+            if os.path.isdir(wd) and not res.get("stopped"):    # a stopped run's may go on
                 shutil.rmtree(wd, ignore_errors=True)
             if verbose:
                 i, s = tag
-                r = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
-                                  eps_v=res["curve"]["eps_v"])
-                r.update(compare(r, hfig))
-                _say(True, f"[calibrate] {stage} set {len(records) + i}, seed {s} "
+                if res.get("stopped"):
+                    what = (f"stopped at eps1 = {100 * res['stopped']['eps1']:.3f} %: it "
+                            f"decides {', '.join(res['stopped']['figures'])} missed")
+                else:
+                    r = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
+                                      eps_v=res["curve"]["eps_v"])
+                    r.update(compare(r, hfig))
+                    what = _fmt_figs(r)
+                _say(True, f"[calibrate] {stage} set {set_index(points[i])}, seed {s} "
                            f"({counts['run']} runs so far, at most {max_evals} sets): "
-                           f"{_fmt_values(space.names, points[i])}: {_fmt_figs(r)}; run "
+                           f"{_fmt_values(space.names, points[i])}: {what}; run "
                            f"{res['wall_time']:.0f} s, elapsed {time.time() - t0:.0f} s")
 
         if where is not None:
@@ -190,11 +216,21 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         _map(tasks, collect, workers, scheduler, fn=task)
         return got
 
+    def set_index(v):
+        """The index of the set of values v: its record's, or where the batch puts it."""
+        return next((r["index"] for r in records if tuple(r["values"]) == tuple(v)),
+                    len(records) + pending.index(tuple(v)))
+
+    pending = []        # the sets of the batch being run, in order
+
     def first_run(res):
         """The figures a set's first run decides as missed by its seeds' mean (none with
-        --no-first-run-decision): ``targets.first_run_decides``."""
+        --no-first-run-decision): ``targets.first_run_decides`` (a stopped run: those its
+        records decided)."""
         if not o.decide_on_first_run:
             return []
+        if res.get("stopped"):
+            return list(res["stopped"]["figures"])
         fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
                             eps_v=res["curve"]["eps_v"])
         err = compare(fig, hfig)
@@ -204,10 +240,11 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
     def evaluate(points, stage):
         # every set on its first seed; the rest of the seeds only where that run leaves the
         # set's mean undecided
+        pending[:] = [tuple(v) for v in points]
         if not o.decide_on_first_run:
             got = run_sets(points, stage, seeds)    # one batch: every run at once
-        else:
-            got = run_sets(points, stage, seeds[:1])
+        else:     # the start set runs whole: the report shows its curve beside the best's
+            got = run_sets(points, stage, seeds[:1], stop=stops and stage != "start")
         decided = {i: first_run(got[(i, seeds[0])]) for i in range(len(points))}
         rest = [i for i in range(len(points)) if not decided[i]]
         if len(seeds) > 1 and rest:
@@ -231,17 +268,46 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
             where.wrote("evaluations.jsonl (every finished run)", "calibration.csv")
         return out
 
+    def complete(points, stage):
+        """Sets whose first run stopped once decided, run on to the end of that run (from its
+        checkpoint: the rows of a run never stopped) and, where the whole run no longer
+        decides (never seen: what a stop decides stays decided), on the other seeds; each
+        record replaced in place."""
+        pending[:] = [tuple(v) for v in points]
+        got = run_sets(points, stage, seeds[:1])
+        out = []
+        for i, v in enumerate(points):
+            old = next(r for r in records if tuple(r["values"]) == tuple(v))
+            decided = first_run(got[(i, seeds[0])])
+            runs = {seeds[0]: got[(i, seeds[0])]}
+            if not decided:
+                more = run_sets([v], stage, seeds[1:])
+                runs.update({s: more[(0, s)] for s in seeds[1:]})
+            used = seeds[:1] if decided else seeds
+            rec = _combine([runs[s] for s in used], used, smooth, post_peak_strain, hfig)
+            rec.update(index=old["index"], stage=old["stage"], values=old["values"],
+                       decided_by=decided, run_on=stage)
+            records[old["index"]] = rec
+            out.append(rec)
+            _say(verbose, f"[calibrate] set {rec['index']} ({old['stage']}) run on to its end "
+                          f"({stage}: the model lacks its figures): {_fmt_figs(rec)}; score "
+                          f"{rec['score']:.3g}")
+        _write_csv(out_dir, space, records, hfig)
+        return out
+
     try:
         start = tuple(getattr(base, f) for f in space.names)
         best, seen, trace, why, info = surrogate_search(
-            space, evaluate, hfig, start=start, initial=initial, max_evals=max_evals, batch=batch)
+            space, evaluate, hfig, start=start, initial=initial, max_evals=max_evals, batch=batch,
+            complete=complete if stops else None)
         if best["decided_by"]:
             # the search ended without a met set and its best was run on one seed: its figures
             # are its seeds' mean like every reported set's (and the check's reference)
             got = run_sets([tuple(best["values"])], "best", seeds)
             full = _combine([got[(0, s)] for s in seeds], seeds, smooth, post_peak_strain, hfig)
             full.update(index=best["index"], stage=best["stage"], values=best["values"],
-                        decided_by=[], completed=True)
+                        decided_by=[], completed=True,
+                        **({"run_on": "best"} if best.get("censored") else {}))
             records[best["index"]] = full
             best = full
         check = []
@@ -284,11 +350,8 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                   for e, q, v in zip(c["eps1"], c["q"], c["eps_v"])])
     ident = None
     model = None
-    inside = [(space.u_of(tuple(r["values"])), r) for r in records]
-    inside = [(u, r) for u, r in inside if u is not None]
-    if len(inside) >= space_dim_min(space):
-        model = FigureModel([u for u, _ in inside],
-                            [[math.log(r[f] / hfig[f]) for f in TOLERANCES] for _, r in inside])
+    model = model_of(space, [(r["values"], r) for r in records], hfig)
+    if model is not None:
         dense = dense_points(len(space.names), 1)
         ub = space.u_of(tuple(best["values"]))
         if ub is not None:
@@ -306,7 +369,13 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                "seed_rule": {"decide_on_first_run": o.decide_on_first_run, "z": DECIDE_Z,
                              "one_run_scatter": one_run_scatter(base.n),
                              "sets_on_first_run": sum(bool(r["decided_by"]) for r in records),
-                             "runs_saved": sum(len(seeds) - len(r["seeds"]) for r in records)},
+                             "runs_saved": sum(len(seeds) - len(r["seeds"]) for r in records),
+                             "stop_decided_runs": stops,
+                             # of the checkpoint's runs (this calibration's, every invocation)
+                             "runs_stopped": sum(k.endswith(STOPPED) for k in done),
+                             "runs_completed": sum(k.endswith(STOPPED) and k[:-len(STOPPED)]
+                                                   in done for k in done),
+                             "sets_stopped": sum(bool(r.get("censored")) for r in records)},
                "run_now": counts["run"], "taken_from_checkpoint": counts["taken"],
                "trace": trace, "met": best["met"], "verdict": verdict,
                "best": {k: best[k] for k in ["index", "stage", "values", "score", "met",

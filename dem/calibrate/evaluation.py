@@ -17,7 +17,7 @@ import numpy as np
 
 from ..params import RENAMED, DemParams, migrate
 from .targets import (DILATANCY_STRAIN, PEAK_FRACTION, SECANT_STRAIN, TOLERANCES, compare,
-                      curve_figures)
+                      curve_figures, score_at_least, stopped_figures)
 
 # options of the header that may differ on --resume (they do not change the search)
 RESUME_FREE = ("max_evals",)
@@ -26,8 +26,18 @@ FORMAT_VERSION = 2         # 1: grid + compass search, eps1 at the peak (issue 1
 
 
 # -- one evaluation (runs in a worker) ----------------------------------------------------------
+STOPPED = "/stopped"     # a stopped run's key in the finished runs: beside its whole run's
+
+
 def params_key(d: dict) -> str:
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def done_key(res: dict) -> str:
+    """The key of a finished run among the finished runs: its parameters' (``params_key``),
+    with STOPPED after it for a run stopped once decided (the same run run on to its end keeps
+    both: a resumed search takes each where the first one took it)."""
+    return res["key"] + (STOPPED if res.get("stopped") else "")
 
 
 def _evaluate_task(a):
@@ -36,6 +46,7 @@ def _evaluate_task(a):
     temporary folder (dask workers); returns the curve and the run's figures."""
     from common import threads
     from ..experiment import run_biaxial
+    from .targets import InRunDecision
     old = threads._default
     threads.set_default_threads(1)
     tmp = None
@@ -44,18 +55,29 @@ def _evaluate_task(a):
         if wd is None:
             wd = tmp = tempfile.mkdtemp(prefix="dem-calibrate-")
         params = DemParams.from_dict(a["params"])
+        rule = a.get("stop")
+        decision = None if rule is None else InRunDecision(
+            rule["target"], rule["n_seeds"], params.n, rule["smooth"])
         res = run_biaxial(params, wd, rate=a["rate"], confining=a["confining"],
                           eps_max=a["eps_max"], post_peak_strain=a["post_peak_strain"],
                           resume=a["resume"], verbose=False, figures=False, vtk=False,
-                          save_fractions=(), allow_soft=a.get("allow_soft", False))
+                          save_fractions=(), allow_soft=a.get("allow_soft", False),
+                          stop=None if decision is None else (lambda rows: _decide(decision, rows)))
         rows = np.asarray(res.rows, float)
-        with open(os.path.join(wd, "summary.json")) as f:
-            comp = json.load(f).get("compaction", {})
+        comp = res.compaction
         out = {"key": a["key"], "params": a["params"],
                "curve": {"eps1": rows[:, 2].tolist(), "q": rows[:, 8].tolist(),
                          "eps_v": rows[:, 4].tolist(), "p": rows[:, 7].tolist()},
                "porosity": comp.get("porosity"), "compaction_converged": comp.get("converged"),
                "steps": int(rows[-1, 0]), "wall_time": float(res.wall_time)}
+        if res.stopped:
+            # decided: what its records fix, and its folder kept (checkpoint.npz) so that
+            # ``complete`` runs it on from there to the rows of a run never stopped
+            out["stopped"] = {**res.stopped, "known": decision.known()}
+            if tmp is None:
+                from common.io import atomic_write_bytes
+                atomic_write_bytes(os.path.join(wd, "result.json"), json.dumps(out).encode())
+            return out
         if tmp is None:
             from common.io import atomic_write_bytes
             atomic_write_bytes(os.path.join(wd, "result.json"), json.dumps(out).encode())
@@ -68,6 +90,16 @@ def _evaluate_task(a):
         threads._default = old
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _decide(decision, rows):
+    """``decision`` (an ``InRunDecision``) told the rows of a biaxial test it has not seen (all
+    from the start of the test: also those of a run resumed from its checkpoint): its decision
+    or None."""
+    for row in rows[len(decision.e):]:
+        if decision.add(row[2], row[8]) is not None:
+            break
+    return decision.decided
 
 
 def _past_peak(curve, post_peak_strain):
@@ -120,13 +152,24 @@ def _combine(runs, seeds, smooth, post_peak_strain, hfig):
     """The record of one parameter set from its runs (one per seed): the figures are the means
     over the seeds, spread_X = (max - min) / mean of figure X over them (None for one run)."""
     per = []
+    censored = {}
     for s, res in zip(seeds, runs):
-        fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
-                            eps_v=res["curve"]["eps_v"])
+        if res.get("stopped"):      # a first run stopped once decided: one seed only
+            fig, censored = stopped_figures(res["curve"], res["stopped"]["known"])
+        else:
+            fig = curve_figures(res["curve"]["eps1"], res["curve"]["q"], smooth,
+                                eps_v=res["curve"]["eps_v"])
         per.append({"seed": s, **fig, "past_peak": _past_peak(res["curve"], post_peak_strain),
                     "porosity": res.get("porosity"), "steps": res["steps"],
                     "wall_time": res["wall_time"], "key": res["key"]})
+        if res.get("stopped"):
+            per[-1]["stopped_at"] = res["stopped"]["eps1"]
+    if censored and len(runs) > 1:
+        raise ValueError("_combine: a stopped run among several seeds")
     rec = _mean_figures(per, hfig)
+    if censored:
+        rec.update(censored=censored, stopped_at=per[0]["stopped_at"],
+                   score=score_at_least({k: rec["err_" + k] for k in TOLERANCES}, censored))
     for k in TOLERANCES:
         v = [p[k] for p in per]
         rec["spread_" + k] = float((max(v) - min(v)) / np.mean(v)) if len(v) > 1 else None
@@ -226,7 +269,7 @@ def read_checkpoint(path, header, notes=None):
         if isinstance(rec, dict) and "key" in rec and "curve" in rec:
             rec["params"] = current_params(rec["params"])
             rec["key"] = params_key(rec["params"])
-            done[rec["key"]] = rec
+            done[done_key(rec)] = rec
     if older:
         old = json.loads(lines[0])["header"]["tolerances"]
         new = [k for k in header["tolerances"] if k not in old]

@@ -5,13 +5,13 @@ finished calibration's files)."""
 from __future__ import annotations
 
 import json
-import math
 import os
 
 import numpy as np
 
 from ..params import RENAMED, DemParams, migrate
-from .search import FigureModel, dense_points, make_space, space_dim_min
+from .report import censored_of
+from .search import dense_points, make_space, model_of
 from .targets import DILATANCY_STRAIN, PEAK_FRACTION, TOLERANCES, _fmt_figs, _fmt_values
 
 SEED_COLORS = ("C3", "C1", "C6", "C5", "C8")     # the calibrated set's seeds, one colour each
@@ -104,7 +104,8 @@ def _axis_label(name):
 
 def _score_figure(out_dir, space, records, best, model):
     """calibration_score.png: the score of every set against each varied parameter (filled
-    green: all targets met, drawn over the best set's open star), and the model's least
+    green: all targets met, drawn over the best set's open star; a triangle: a set whose run
+    stopped once decided, its score a bound from below), and the model's least
     predicted score over the other parameters; log parameters on log axes labelled at 1, 2, 5
     of each decade (``common.plots.log_axis``)."""
     import matplotlib
@@ -118,6 +119,8 @@ def _score_figure(out_dir, space, records, best, model):
     pred = model.score(dense)
     sc = np.array([r["score"] for r in records])
     met = np.array([bool(r["met"]) for r in records])
+    # a first run stopped once decided (--stop-decided-runs): its score a bound from below
+    cut = np.array([bool(r.get("censored")) for r in records])
     for j, ax in enumerate(axes[0]):
         bins = np.linspace(0, 1, 41)
         k = np.clip(np.digitize(dense[:, j], bins) - 1, 0, 39)
@@ -128,8 +131,12 @@ def _score_figure(out_dir, space, records, best, model):
         x = np.array([r["values"][j] for r in records])
         ax.plot([best["values"][j]], [max(best["score"], 1e-3)], "*", mfc="none", mec="C3",
                 mew=1.4, ms=16, label="best set (open star)", zorder=3)
-        ax.plot(x[~met], np.maximum(sc[~met], 1e-3), "o", mfc="none", color="C0", ms=5,
+        miss = ~met & ~cut
+        ax.plot(x[miss], np.maximum(sc[miss], 1e-3), "o", mfc="none", color="C0", ms=5,
                 label="sets evaluated: a target missed", zorder=4)
+        if cut.any():
+            ax.plot(x[cut], np.maximum(sc[cut], 1e-3), "^", mfc="none", color="C1", ms=6,
+                    label="run stopped once decided: score at least", zorder=4)
         if met.any():
             ax.plot(x[met], np.maximum(sc[met], 1e-3), "o", color="C2", mec="k", mew=0.5,
                     ms=6, label="sets evaluated: all targets met", zorder=5)
@@ -212,8 +219,10 @@ def redraw_figures(out_dir):
             c[k].append(r[k])
     seeds = opts["seeds"]
     hcurve = next(c for (name, _), c in curves.items() if name == "hmodel")
-    start = dict(s["start"], curves=[curves[("dem_start", sd)] for sd in seeds],
-                 seeds=[{"seed": sd} for sd in seeds])
+    # a start set decided on its first run ran on that seed only
+    ran = [sd for sd in seeds if ("dem_start", sd) in curves]
+    start = dict(s["start"], curves=[curves[("dem_start", sd)] for sd in ran],
+                 seeds=[{"seed": sd} for sd in ran])
     best = dict(s["best"], curves=[curves[("dem_calibrated", sd)] for sd in seeds],
                 seeds=s["best_seeds"])
     check = [dict(c, curve=curves[("dem_calibrated_check", c["seed"])]) for c in s["check"]
@@ -221,13 +230,12 @@ def redraw_figures(out_dir):
     _figure(out_dir, hcurve, hfig, start, best, check, s.get("start_label", "DEM, start set"),
             space, s.get("check_mean"))
     _search_figure(out_dir, space, records, best)
-    inside = [(space.u_of(tuple(r["values"])), r) for r in records]
-    inside = [(u, r) for u, r in inside if u is not None]
-    if len(inside) >= space_dim_min(space):
-        # a folder of before the dilatancy target (issue 34): its own figures
-        names = [f for f in TOLERANCES if f in hfig and all(f in r for _, r in inside)]
-        model = FigureModel([u for u, _ in inside],
-                            [[math.log(r[f] / hfig[f]) for f in names] for _, r in inside], names)
+    # a folder of before the dilatancy target (issue 34): its own figures
+    names = [f for f in TOLERANCES if f in hfig and all(f in r for r in records)]
+    for r in records:
+        r["censored"] = censored_of(r.get("censored"))
+    model = model_of(space, [(r["values"], r) for r in records], hfig, names)
+    if model is not None:
         _score_figure(out_dir, space, records, best, model)
 
 

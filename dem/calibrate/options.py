@@ -86,6 +86,8 @@ class CalibrationOptions:
     smooth: float = 0.001              # strain window of q's moving average for the peak [-]
     decide_on_first_run: bool = True   # a set whose first run decides it missed runs on no
                                        # other seed (first_run_decides); False: every seed
+    stop_decided_runs: bool = False    # a set's first run stops once its records decide
+                                       # (InRunDecision; the model takes its figures censored)
 
     @staticmethod
     def allowed_text(field) -> str:
@@ -121,6 +123,11 @@ class CalibrationOptions:
                               f"integer {least} <= value <= {_RANGE['initial'].hi} (the number "
                               "of --vary fields + 2 at least: the model of the figures needs "
                               "that many sets)")
+        if rec.stop_decided_runs and (not rec.decide_on_first_run or len(seeds) < 2):
+            why = ("--no-first-run-decision: no first run decides" if not rec.decide_on_first_run
+                   else f"--seeds {','.join(map(str, seeds))}: one seed, its run is the set's")
+            raise OptionError(f"--stop-decided-runs with {why}; allowed with the first-run "
+                              "decision and two seeds or more")
         common = sorted(set(check) & set(seeds))
         if common:
             raise OptionError(f"--check-seeds {','.join(map(str, check))} (--seeds "

@@ -10,14 +10,14 @@ import numpy as np
 from common.io import atomic_write_bytes
 
 from .search import MARGIN_SIGMAS
-from .targets import FIGURE_TEXT, TOLERANCES, _fmt_figs, _fmt_values
+from .targets import FIGURE_TEXT, SECANT_STRAIN, TOLERANCES, _fmt_figs, _fmt_values
 
 # the figures, their errors and met flags, met and score (summary.json's best and start)
 FIGURE_COLS = (list(TOLERANCES) + ["err_" + k for k in TOLERANCES]
                + ["met_" + k for k in TOLERANCES] + ["met", "score"])
 CSV_FIXED = FIGURE_COLS + ["eps1_peak", "past_peak", "peak_q_raw"] + [
     "spread_" + k for k in TOLERANCES] + ["porosity", "steps", "wall_time", "runs",
-                                          "decided_by"]
+                                          "decided_by", "stopped_at", "censored"]
 RUN_FIXED = list(TOLERANCES) + ["eps1_peak", "past_peak", "peak_q_raw", "porosity", "steps",
                                 "wall_time"]
 
@@ -35,6 +35,17 @@ def _spread(records):
     return out
 
 
+def censored_text(censored):
+    """calibration.csv's text of a record's "censored" ({figure: how}): "peak_q at least,
+    dilatancy unknown"; "" when every figure is exact."""
+    return ", ".join(f"{k} {how}" for k, how in (censored or {}).items())
+
+
+def censored_of(text):
+    """The "censored" dict of ``censored_text``'s text."""
+    return dict(part.split(" ", 1) for part in str(text or "").split(", ") if part)
+
+
 def _cell(v):
     return int(v) if isinstance(v, bool) else ("" if v is None else v)
 
@@ -47,9 +58,10 @@ def _write_csv(out_dir, space, records, hfig):
                                                                 ("spread", 0.0))}}
     rows = [["hmodel", "", "target"] + [""] * len(space.names)
             + [_cell(target.get(c)) for c in CSV_FIXED]]
-    target.update(runs="", decided_by="")
+    target.update(runs="", decided_by="", stopped_at="", censored="")
     for r in sorted(records, key=lambda r: r["index"]):
-        more = {"runs": len(r["seeds"]), "decided_by": "+".join(r.get("decided_by") or [])}
+        more = {"runs": len(r["seeds"]), "decided_by": "+".join(r.get("decided_by") or []),
+                "stopped_at": r.get("stopped_at"), "censored": censored_text(r.get("censored"))}
         rows.append(["dem", r["index"], r["stage"]] + list(r["values"])
                     + [_cell(more[c] if c in more else r[c]) for c in CSV_FIXED])
     io.write_csv(os.path.join(out_dir, "calibration.csv"), cols, rows)
@@ -77,7 +89,8 @@ def _verdict(space, records, best, hfig, why, info, check, check_mean=None):
         line = {"figure": FIGURE_TEXT[k], "target": hfig[k], "best_value": best[k], "error": e,
                 "tolerance": tol, "met": best["met_" + k]}
         if not best["met_" + k]:
-            c = min(records, key=lambda r: (abs(r["err_" + k]), r["index"]))
+            c = min((r for r in records if k not in (r.get("censored") or {})),
+                    key=lambda r: (abs(r["err_" + k]), r["index"]))
             line["closest"] = {"index": c["index"], "error": c["err_" + k], "met": c["met_" + k],
                                "params": dict(zip(space.names, c["values"]))}
         lines.append(line)
@@ -205,9 +218,28 @@ def _report(out_dir, s, space, records):
                   f"{len(records)} sets were decided on one run, {sr['runs_saved']} runs "
                   "saved:", "", "| set | stage | runs | decided missed on its first run |",
                   "|---|---|---|---|"]
-            L += [f"| {r['index']} | {r['stage']} | {len(r['seeds'])} | "
-                  f"{', '.join(FIGURE_TEXT[k] for k in r.get('decided_by') or []) or '-'} |"
-                  for r in sorted(records, key=lambda r: r["index"])]
+            if sr.get("stop_decided_runs"):
+                L[-3:] = [
+                    L[-3], "", f"A first run (but the start set's) stopped once its records "
+                    f"decided a target missed (--stop-decided-runs: the secant modulus is exact "
+                    f"from {100 * SECANT_STRAIN:g} % of axial strain, peak q and eps1_95 known "
+                    "from below, the dilatancy ratio not at all): "
+                    f"{sr['runs_stopped']} runs stopped, {sr['runs_completed']} of them run on "
+                    "to their end where the model of the figures lacked a figure (it needs each "
+                    "on the number of --vary fields + 2 sets); the other sets' figures enter "
+                    "the model as bounds or not at all:", "",
+                    "| set | stage | runs | decided missed on its first run | its first run |",
+                    "|---|---|---|---|---|"]
+                L += [f"| {r['index']} | {r['stage']} | {len(r['seeds'])} | "
+                      f"{', '.join(FIGURE_TEXT[k] for k in r.get('decided_by') or []) or '-'} | "
+                      + (f"stopped at {100 * r['stopped_at']:.3f} % |" if r.get("censored") else
+                         f"stopped, then run on to its end ({r['run_on']}) |"
+                         if r.get("run_on") else "whole |")
+                      for r in sorted(records, key=lambda r: r["index"])]
+            else:
+                L += [f"| {r['index']} | {r['stage']} | {len(r['seeds'])} | "
+                      f"{', '.join(FIGURE_TEXT[k] for k in r.get('decided_by') or []) or '-'} |"
+                      for r in sorted(records, key=lambda r: r["index"])]
     L += ["", "## The seeds' spread", "",
           "(max - min) / mean of each figure over the seeds of a set, over the sets run on more "
           "than one seed:", "",

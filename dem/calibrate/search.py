@@ -115,6 +115,38 @@ def _band(k):
     return math.log(1.0 - t), math.log(1.0 + t)
 
 
+CENSORED = ("at least", "unknown")   # how a stopped run knows a figure: from below, or not
+
+
+def _loo_smoothing(U, Y):
+    """The smoothing of each column of Y among SMOOTHINGS of least leave-one-out error (the
+    first of equal ones) and that error: (indices, RMS errors), one per column."""
+    from scipy.interpolate import RBFInterpolator
+    n = len(U)
+    loo = np.full((len(SMOOTHINGS), Y.shape[1]), np.inf)
+    for i, s in enumerate(SMOOTHINGS):
+        err = np.empty_like(Y)
+        for j in range(n):
+            keep = np.arange(n) != j
+            try:
+                f = RBFInterpolator(U[keep], Y[keep], smoothing=s,
+                                    kernel="thin_plate_spline", degree=1)
+                err[j] = f(U[j:j + 1])[0] - Y[j]
+            except (np.linalg.LinAlgError, ValueError):
+                err[j] = np.inf
+        loo[i] = np.sqrt(np.mean(err ** 2, axis=0))
+    best = np.argmin(loo, axis=0)
+    return best, loo[best, np.arange(Y.shape[1])]
+
+
+def _slope(U, y):
+    """The largest over the rows of |dy| / |du| to the nearest other row."""
+    D = np.linalg.norm(U[:, None, :] - U[None], axis=2)
+    np.fill_diagonal(D, np.inf)
+    j = np.argmin(D, axis=1)
+    return float(np.max(np.abs(y - y[j]) / D[np.arange(len(U)), j]))
+
+
 class FigureModel:
     """Radial-basis-function model (thin-plate spline with a linear tail, scipy's
     ``RBFInterpolator``) of y_k = log(figure_k / target_k), k in TOLERANCES, over u in [0, 1]^d.
@@ -122,12 +154,20 @@ class FigureModel:
     The smoothing of each figure is chosen among SMOOTHINGS by leave-one-out (LOO) error: 0
     (interpolation) for an exact model, larger where the DEM's sample-to-sample scatter is;
     ``loo[k]`` (the RMS LOO error of y_k, i.e. a relative error) is the model's own error bar.
-    U: (n, d) array, Y: (n, k) array (columns in the order of TOLERANCES, or of ``names``)."""
+    U: (n, d) array, Y: (n, k) array (columns in the order of TOLERANCES, or of ``names``).
 
-    def __init__(self, U, Y, names=None):
+    ``censored``: None (every value exact) or an (n, k) array of how each value is known, 0
+    exact, 1 from below (Y the bound: a run stopped before its peak, ``InRunDecision``), 2 not
+    at all (Y ignored). A figure's model is then fitted on its exact values (the smoothing and
+    LOO error from them alone) and its bounds: a bound the exact values' model predicts
+    exceeded is that prediction (it says nothing more), one it predicts not reached is the
+    value (the least the set's figure can be); ``Y`` holds the values so taken (NaN where
+    unknown). Each figure needs d + 2 exact values (``model_sets_min``)."""
+
+    def __init__(self, U, Y, names=None, censored=None):
         from scipy.interpolate import RBFInterpolator
         self.U = np.asarray(U, float)
-        self.Y = np.asarray(Y, float)
+        self.Y = np.array(Y, float)
         n, d = self.U.shape
         if n < d + 2:
             raise ValueError(f"FigureModel: {n} points in {d} dimensions; needs at least {d + 2}")
@@ -135,32 +175,34 @@ class FigureModel:
         if self.Y.ndim != 2 or self.Y.shape[1] != len(self.names):
             raise ValueError(f"FigureModel: Y has {self.Y.shape[-1]} columns for the figures "
                              f"{', '.join(self.names)}")
-        loo = np.full((len(SMOOTHINGS), self.Y.shape[1]), np.inf)
-        for i, s in enumerate(SMOOTHINGS):
-            err = np.empty_like(self.Y)
-            for j in range(n):
-                keep = np.arange(n) != j
-                try:
-                    f = RBFInterpolator(self.U[keep], self.Y[keep], smoothing=s,
-                                        kernel="thin_plate_spline", degree=1)
-                    err[j] = f(self.U[j:j + 1])[0] - self.Y[j]
-                except (np.linalg.LinAlgError, ValueError):
-                    err[j] = np.inf
-            loo[i] = np.sqrt(np.mean(err ** 2, axis=0))
-        best = np.argmin(loo, axis=0)              # the first (least smoothing) of equal ones
-        self.smoothing = tuple(SMOOTHINGS[i] for i in best)
-        self.loo = {k: float(loo[best[c], c]) for c, k in enumerate(self.names)}
-        self._f = [RBFInterpolator(self.U, self.Y[:, c], smoothing=self.smoothing[c],
-                                   kernel="thin_plate_spline", degree=1)
-                   for c in range(self.Y.shape[1])]
-        # slope of each figure between neighbouring sets (the largest over the sets of |dy| / |du| to
-        # the nearest one): how fast the error bar grows away from the sets evaluated
-        D = np.linalg.norm(self.U[:, None, :] - self.U[None], axis=2)
-        np.fill_diagonal(D, np.inf)
-        j = np.argmin(D, axis=1)
-        dist = D[np.arange(n), j]
-        self.slope = {k: float(np.max(np.abs(self.Y[:, c] - self.Y[j, c]) / dist))
-                      for c, k in enumerate(self.names)}
+        C = np.zeros(self.Y.shape, int) if censored is None else np.asarray(censored, int)
+        tps = dict(kernel="thin_plate_spline", degree=1)
+        if not C.any():
+            best, loo = _loo_smoothing(self.U, self.Y)
+            self.smoothing = tuple(SMOOTHINGS[i] for i in best)
+            self.loo = {k: float(e) for k, e in zip(self.names, loo)}
+            self._f = [RBFInterpolator(self.U, self.Y[:, c], smoothing=self.smoothing[c], **tps)
+                       for c in range(self.Y.shape[1])]
+            self.slope = {k: _slope(self.U, self.Y[:, c]) for c, k in enumerate(self.names)}
+            return
+        smoothing, self.loo, self._f, self.slope = [], {}, [], {}
+        for c, k in enumerate(self.names):
+            exact, below = C[:, c] == 0, C[:, c] == 1
+            if exact.sum() < d + 2:
+                raise ValueError(f"FigureModel: {k} known exactly on {exact.sum()} points in "
+                                 f"{d} dimensions; needs at least {d + 2}")
+            best, loo = _loo_smoothing(self.U[exact], self.Y[exact][:, [c]])
+            s = SMOOTHINGS[best[0]]
+            if below.any():
+                f = RBFInterpolator(self.U[exact], self.Y[exact, c], smoothing=s, **tps)
+                self.Y[below, c] = np.maximum(self.Y[below, c], f(self.U[below]))
+            self.Y[C[:, c] == 2, c] = np.nan
+            rows = exact | below
+            smoothing.append(s)
+            self.loo[k] = float(loo[0])
+            self._f.append(RBFInterpolator(self.U[rows], self.Y[rows, c], smoothing=s, **tps))
+            self.slope[k] = _slope(self.U[rows], self.Y[rows, c])
+        self.smoothing = tuple(smoothing)
 
     def distance(self, U):
         """Distance (in u) of each row of U to the nearest set the model was fitted on."""
@@ -287,8 +329,51 @@ def initial_design(d, n, seed):
     return qmc.Sobol(d, scramble=True, seed=seed).random_base2(m)[:n]
 
 
+def model_of(space: Space, sets, target, names=None):
+    """The ``FigureModel`` of the sets inside the box: y_k = log(figure_k / target_k) over
+    (values, record) pairs ``sets``, censored where the record says (its "censored": {figure:
+    one of CENSORED}, a first run stopped by ``InRunDecision``), or None while a figure is known
+    exactly on fewer than ``model_sets_min`` of them (``short_figures``)."""
+    names = tuple(TOLERANCES) if names is None else tuple(names)
+    inside = [(space.u_of(tuple(v)), r) for v, r in sets]
+    inside = [(u, r) for u, r in inside if u is not None]
+    if short_figures(space, [r for _, r in inside], names):
+        return None
+    code = lambda r, f: 1 + CENSORED.index(r["censored"][f]) if f in (r.get("censored") or {}) \
+        else 0
+    C = np.array([[code(r, f) for f in names] for _, r in inside], int)
+    Y = [[math.log(r[f] / target[f]) if c < 2 else math.nan for f, c in zip(names, row)]
+         for (_, r), row in zip(inside, C)]
+    return FigureModel([u for u, _ in inside], Y, names, C if C.any() else None)
+
+
+def short_figures(space: Space, records, names=None):
+    """The figures known exactly on fewer than ``model_sets_min`` of ``records`` (those inside
+    the box): what the model lacks."""
+    need = space_dim_min(space)
+    return [f for f in (tuple(TOLERANCES) if names is None else names)
+            if sum(f not in (r.get("censored") or {}) for r in records) < need]
+
+
+def to_complete(space: Space, sets):
+    """The stopped sets (values) to run to the end so that every figure is known exactly on
+    ``model_sets_min`` sets inside the box: in the order of ``rank`` (the score so far, a bound
+    from below: the sets nearest the targets first), each one taken when it lacks a figure
+    still short."""
+    inside = [(v, r) for v, r in sets if space.u_of(tuple(v)) is not None]
+    need = space_dim_min(space)
+    have = {f: sum(f not in (r.get("censored") or {}) for _, r in inside) for f in TOLERANCES}
+    out = []
+    for v, r in sorted((p for p in inside if p[1].get("censored")), key=lambda p: rank(p[1])):
+        if any(have[f] < need for f in r["censored"]):
+            out.append(tuple(v))
+            for f in r["censored"]:
+                have[f] += 1
+    return out
+
+
 def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max_evals=32, batch=1,
-                     design_seed=0):
+                     design_seed=0, complete=None):
     """Global search of the parameter sets (module docstring): the start set, a space-filling
     design of ``initial`` Sobol points, then rounds of ``batch`` sets where the model of the
     four figures (``FigureModel``, refitted on every evaluation inside the box) predicts the
@@ -301,7 +386,12 @@ def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max
     ``target``: the target figures (dict of TOLERANCES' keys).  ``evaluate(list of value
     tuples, stage) -> list of records`` (dicts with at least met, score, index and the figures
     of TOLERANCES), called once per batch with the sets not evaluated yet.  Returns (best
-    record, {values: record}, trace, why it stopped, the model's last analysis or None)."""
+    record, {values: record}, trace, why it stopped, the model's last analysis or None).
+
+    A record may know some figures only from below or not at all (its "censored": a first run
+    stopped once it decided, ``InRunDecision``); ``complete(list of value tuples, stage) ->
+    list of records`` then runs such sets to the end, the fewest that give the model every
+    figure exactly on ``model_sets_min`` sets (``to_complete``), before the model is fitted."""
     if initial < space_dim_min(space):
         raise ValueError(f"initial={initial!r}; allowed an integer >= {space_dim_min(space)}")
     seen = {}
@@ -335,13 +425,14 @@ def surrogate_search(space: Space, evaluate, target, start=None, initial=16, max
         if best()["met"]:
             why = "targets met"
             break
-        pts = [(space.u_of(v), r) for v, r in seen.items()]
-        pts = [(u, r) for u, r in pts if u is not None]
-        model = None
-        if len(pts) >= space_dim_min(space):
-            model = FigureModel([u for u, _ in pts],
-                                [[math.log(r[f] / target[f]) for f in TOLERANCES]
-                                 for _, r in pts])
+        if complete is not None:
+            todo = to_complete(space, seen.items())
+            if todo:
+                seen.update(zip(todo, complete(todo, f"complete{k + 1}")))
+                trace.append({"stage": f"complete{k + 1}", "points": len(todo),
+                              "evaluated": len(todo)})
+        model = model_of(space, seen.items(), target)
+        if model is not None:
             info = analyse(model, dense)
             info["round"] = k
             trace[-1]["model"] = {key: info[key] for key in (

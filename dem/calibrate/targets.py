@@ -60,11 +60,12 @@ def first_run_decides(err: dict, n_seeds: int, n_disks: int) -> list:
             if abs(err[k]) > tol + DECIDE_Z * sig[k] * (1.0 + max(err[k], 0.0)) * shrink]
 
 
-def decided_in_run(eps1, q, target: dict, n_seeds: int, n_disks: int, smooth=0.001):
-    """The first record of a run's curve at which the records so far already decide a target
-    missed by the mean over ``n_seeds`` (``first_run_decides``'s bound), looking at no later
-    record: what an in-run stop of a set's first run could save.  ``target``: the target's
-    figures (``curve_figures``).  What the records up to strain e fix:
+class InRunDecision:
+    """The in-run stop of a set's first run, one record at a time (``add``): what the records
+    so far fix of the run's figures (``known``) and whether they already decide a target missed
+    by the mean over ``n_seeds`` (``first_run_decides``' bound), looking at no later record.
+    ``target``: the target's figures (``curve_figures``); ``smooth``: the strain window of q's
+    moving average (``smoothed``). What the records up to strain e fix:
 
     - the secant modulus, exactly, once e >= SECANT_STRAIN (it interpolates between the two
       records about that strain);
@@ -79,37 +80,108 @@ def decided_in_run(eps1, q, target: dict, n_seeds: int, n_disks: int, smooth=0.0
     - nothing of the dilatancy ratio (it is read after the final eps1_95) nor of peak q or
       eps1_95 from above (the peak may still come).
 
-    Returns None, or {"index": i, "eps1": eps1[i], "figures": [...]} (the figures decided
-    there).  The figures a full run's ``first_run_decides`` gives include them. The search
-    does not stop runs so (docs/dem.md, "A first run is not stopped when it has decided": the
-    model of the figures needs the rest of the curve); ``bench/calibration_stop.py`` replays a
-    calibration with it."""
-    e = np.asarray(eps1, float)
-    q = np.asarray(q, float)
-    qs = smoothed(e, q, smooth)     # a value whose window lies whole before e[i] is final at i
-    half = _half(smooth) if smooth > 0 and len(q) >= 3 else 0.0
-    zero = {k: 0.0 for k in TOLERANCES}
-    best = -np.inf
-    k_done = 0
-    sec_err = None
-    for i in range(len(e)):
+    ``add(eps1, q)`` returns None, or {"index": i, "eps1": eps1, "figures": [...]} (the figures
+    decided there) at the first record that decides; the figures a full run's
+    ``first_run_decides`` gives include them."""
+
+    def __init__(self, target: dict, n_seeds: int, n_disks: int, smooth=0.001):
+        self.target, self.n_seeds, self.n_disks, self.smooth = target, n_seeds, n_disks, smooth
+        self.e, self.q = [], []
+        self.k_done = 0            # records whose smoothed q is final
+        self.best = -math.inf      # the largest of those
+        self.sec = None            # the secant modulus, once past SECANT_STRAIN
+        self.decided = None
+
+    def add(self, eps1, q):
+        """The next record (eps1 increasing); the decision, or None while undecided."""
+        if self.decided is not None:
+            return self.decided
+        self.e.append(float(eps1))
+        self.q.append(float(q))
+        e, qq = np.asarray(self.e), np.asarray(self.q)
+        i = len(e) - 1
+        if self.sec is None and e[i] >= SECANT_STRAIN:
+            self.sec = _secant(e, qq)       # fixed from the first record past the secant strain
+        # the smoothed values are those of the whole curve where their window lies whole
+        # before e[i] (``smoothed`` switches to the raw q below 3 records: here 3 are needed)
+        half = _half(self.smooth) if self.smooth > 0 else 0.0
+        k = int(np.searchsorted(e, e[i] - half, side="right"))
+        if k > self.k_done and (self.smooth <= 0 or len(e) >= 3):
+            qs = smoothed(e, qq, self.smooth)
+            self.best = max(self.best, float(np.max(qs[self.k_done:k])))
+            self.k_done = k
+            self._qs = qs[:k]
         err = {}
-        if e[i] >= SECANT_STRAIN:
-            if sec_err is None:     # fixed from the first record past the secant strain on
-                sec_err = _secant(e[:i + 1], q[:i + 1]) / target["secant"] - 1.0
-            err["secant"] = sec_err
-        k = int(np.searchsorted(e, e[i] - half, side="right"))   # records with final values
-        if k > k_done:
-            best = max(best, float(np.max(qs[k_done:k])))
-            k_done = k
-        if k_done:
-            up = {"peak_q": best / target["peak_q"] - 1.0,
-                  "eps1_95": _first_reach(e[:k_done], qs[:k_done], PEAK_FRACTION * best)
-                  / target["eps1_95"] - 1.0}
-            err.update({f: v for f, v in up.items() if v > 0.0})
-        figs = [f for f in first_run_decides({**zero, **err}, n_seeds, n_disks) if f in err]
+        for f, v in self.known().items():
+            if f in ("peak_q", "eps1_95"):
+                v = v[1]
+                if not v > self.target[f]:      # a bound from below decides above the target
+                    continue
+            err[f] = v / self.target[f] - 1.0
+        zero = {f: 0.0 for f in TOLERANCES}
+        figs = [f for f in first_run_decides({**zero, **err}, self.n_seeds, self.n_disks)
+                if f in err]
         if figs:
-            return {"index": i, "eps1": float(e[i]), "figures": figs}
+            self.decided = {"index": i, "eps1": float(e[i]), "figures": figs}
+        return self.decided
+
+    def known(self) -> dict:
+        """What the records so far fix: {"secant": value} once past SECANT_STRAIN, and
+        {"peak_q": ("at least", bound), "eps1_95": ("at least", bound)} once a smoothed value is
+        final; the dilatancy ratio never (``censored_figures``)."""
+        out = {}
+        if self.sec is not None:
+            out["secant"] = self.sec
+        if self.k_done:
+            e = np.asarray(self.e[:self.k_done])
+            out["peak_q"] = ("at least", self.best)
+            out["eps1_95"] = ("at least", _first_reach(e, self._qs, PEAK_FRACTION * self.best))
+        return out
+
+
+def stopped_figures(curve, known) -> tuple:
+    """The figures of a run stopped by its ``InRunDecision`` (``known``: what its records fixed,
+    ``InRunDecision.known``; ``curve``: its records) as ``curve_figures`` gives a whole run's,
+    and how each is known: (figures, {figure: "at least" | "unknown"} for those not exact).
+    A bound from below is its value; an unknown figure is NaN; eps1_peak is unknown,
+    peak_q_raw the largest q so far (a bound from below)."""
+    fig = {"peak_q": math.nan, "eps1_peak": math.nan, "eps1_95": math.nan, "secant": math.nan,
+           "peak_q_raw": float(np.max(curve["q"])), "dilatancy": math.nan}
+    censored = {}
+    for f in TOLERANCES:
+        v = known.get(f)
+        if v is None:
+            censored[f] = "unknown"
+        elif isinstance(v, (list, tuple)):
+            censored[f], fig[f] = v[0], float(v[1])
+        else:
+            fig[f] = float(v)
+    return fig, censored
+
+
+def score_at_least(err: dict, censored: dict) -> float:
+    """The least score sum((err_X / tol_X)^2) a set can have given its errors ``err``
+    ({figure: fig/target - 1}) where some figures are known only from below or not at all
+    (``censored``): an unknown figure, or one whose bound lies below its target, counts 0."""
+    total = 0.0
+    for k, tol in TOLERANCES.items():
+        how = censored.get(k)
+        if how == "unknown" or (how == "at least" and not err[k] > 0):
+            continue
+        total += (err[k] / tol) ** 2
+    return float(total)
+
+
+def decided_in_run(eps1, q, target: dict, n_seeds: int, n_disks: int, smooth=0.001):
+    """The first record of a run's curve at which the records so far already decide a target
+    missed by the mean over ``n_seeds`` (``InRunDecision``, record by record: it reads no
+    later record), or None. ``bench/calibration_stop.py`` replays a calibration with it; ``dem
+    calibrate --stop-decided-runs`` stops its first runs so."""
+    d = InRunDecision(target, n_seeds, n_disks, smooth)
+    for a, b in zip(eps1, q):
+        r = d.add(a, b)
+        if r is not None:
+            return r
     return None
 
 
@@ -237,9 +309,22 @@ def _fmt_values(names, values):
 
 
 def _fmt_figs(rec):
-    return (f"peak q = {rec['peak_q'] / 1e3:.1f} kPa ({rec['err_peak_q']:+.1%}), eps1 at "
-            f"{PEAK_FRACTION:.0%} of it = {100 * rec['eps1_95']:.3f} % ({rec['err_eps1_95']:+.1%}"
-            f"{'' if rec.get('past_peak', True) else ', not past the peak'}), secant = "
-            f"{rec['secant'] / 1e6:.1f} MPa ({rec['err_secant']:+.1%})"
-            + (f", dilatancy ratio {rec['dilatancy']:.3f} ({rec['err_dilatancy']:+.1%})"
-               if "err_dilatancy" in rec else ""))
+    """The four figures of a record in one line, each with its error; a figure a stopped run
+    knows from below is written ">=", one it does not know "unknown" (``stopped_figures``)."""
+    cens = rec.get("censored") or {}
+
+    def fig(k, text, value, more="", eq="= "):
+        how = cens.get(k)
+        if how == "unknown":
+            return f"{text} unknown"
+        sign = ">= " if how == "at least" else ""
+        return f"{text} {sign or eq}{value} ({sign}{rec['err_' + k]:+.1%}{more})"
+
+    late = "" if rec.get("past_peak", True) or cens else ", not past the peak"
+    parts = [fig("peak_q", "peak q", f"{rec['peak_q'] / 1e3:.1f} kPa"),
+             fig("eps1_95", f"eps1 at {PEAK_FRACTION:.0%} of it",
+                 f"{100 * rec['eps1_95']:.3f} %", late),
+             fig("secant", "secant", f"{rec['secant'] / 1e6:.1f} MPa")]
+    if "err_dilatancy" in rec:
+        parts.append(fig("dilatancy", "dilatancy ratio", f"{rec['dilatancy']:.3f}", eq=""))
+    return ", ".join(parts)

@@ -732,6 +732,8 @@ BAD = [
     (["--vary", "phi_g", "--workers", "0"], "--workers"),
     (["--vary", "phi_g", "--workers", "1", "--scheduler", "tcp://x:1"], "--scheduler"),
     (["--vary", "phi_g", "--phi-g", "95"], "--phi-g"),
+    (["--vary", "phi_g", "--stop-decided-runs", "--no-first-run-decision"], "--stop-decided-runs"),
+    (["--vary", "phi_g", "--stop-decided-runs", "--seeds", "1"], "--stop-decided-runs"),
 ]
 
 
@@ -1128,3 +1130,255 @@ def test_the_replay_of_a_calibration_with_an_in_run_stop(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].endswith("allowed a finished `python -m dem calibrate` folder "
                             "(evaluations.jsonl and calibration.csv)") and "DIR" in err[-1]
+
+
+# -- the in-run stop in the search (--stop-decided-runs) -------------------------------------------
+def test_figure_model_takes_bounds_from_below_and_unknown_values():
+    """A figure known exactly on some sets, from below on others: a bound the exact values'
+    model already predicts exceeded adds nothing (the thin-plate spline through the exact values
+    passes through those points too, and is the least-bending function doing so: the same
+    model, to round-off), one it predicts not reached is the value there (interpolated); a
+    figure not known on a set is left out of that figure's fit; d + 2 exact values needed."""
+    U = C.initial_design(3, 16, 3)
+    y = 0.2 * np.sin(3 * U[:, 0]) + 0.1 * U[:, 1] ** 2
+    lin = 0.3 * U[:, 0] - 0.1 * U[:, 2]
+    Y = np.column_stack([y, lin, lin, lin])
+    full = C.FigureModel(U, Y)
+    none = C.FigureModel(U, Y, censored=np.zeros(Y.shape, int))
+    P = C.initial_design(3, 64, 9)
+    assert np.array_equal(full(P), none(P))            # no censoring: the very same model
+    E = C.FigureModel(U[:10], Y[:10])                    # the exact values alone
+    assert E.smoothing[0] == 0.0                          # an exact figure: interpolated
+    cens = np.zeros(Y.shape, int)
+    cens[10:, 0] = 1
+    low, high = Y.copy(), Y.copy()
+    low[10:, 0] = E(U[10:])[:, 0] - 0.3                   # bounds the model predicts exceeded
+    high[10:, 0] = E(U[10:])[:, 0] + 0.3                  # bounds it predicts not reached
+    m_low = C.FigureModel(U, low, censored=cens)
+    assert m_low(P)[:, 0] == pytest.approx(E(P)[:, 0], abs=1e-9)
+    assert m_low.loo["peak_q"] == E.loo["peak_q"]        # the error bar: of the exact values
+    m_high = C.FigureModel(U, high, censored=cens)
+    assert m_high(U[10:])[:, 0] == pytest.approx(high[10:, 0], abs=1e-9)
+    assert np.array_equal(m_high.Y[10:, 0], high[10:, 0])
+    # unknown: the dilatancy ratio on 9 sets; its model is that of the other 7
+    cens_u = np.zeros(Y.shape, int)
+    cens_u[7:, 3] = 2
+    Yu = Y.copy()
+    Yu[7:, 3] = np.nan
+    m_u = C.FigureModel(U, Yu, censored=cens_u)
+    assert np.isnan(m_u.Y[7:, 3]).all()
+    assert m_u(P)[:, 3] == pytest.approx(C.FigureModel(U[:7], Y[:7])(P)[:, 3], abs=1e-9)
+    assert m_u(P)[:, 0] == pytest.approx(full(P)[:, 0], abs=1e-12)   # the other figures: all 16
+    cens_u[4:, 3] = 2
+    with pytest.raises(ValueError, match="dilatancy known exactly on 4 points in 3 dimensions"):
+        C.FigureModel(U, Yu, censored=cens_u)
+
+
+def _stopped_record(f, target):
+    """The record of a set whose first run stopped at the secant strain: the secant exact, peak
+    q and eps1_95 known from below (a run at 0.25 % has seen part of its rise), the dilatancy
+    ratio not at all (as ``stopped_figures`` gives)."""
+    fig = {**f, "peak_q": 0.6 * f["peak_q"], "eps1_95": 0.2 * f["eps1_95"],
+           "dilatancy": math.nan}
+    cens = {"peak_q": "at least", "eps1_95": "at least", "dilatancy": "unknown"}
+    rec = C.compare(fig, target)
+    rec.update(fig, censored=cens,
+               score=C.score_at_least({k: rec["err_" + k] for k in C.TOLERANCES}, cens))
+    return rec
+
+
+def test_to_complete_runs_on_the_fewest_stopped_sets_nearest_the_targets():
+    space = _space3()
+    U = C.initial_design(3, 9, 0)
+    sets = []
+    for i, u in enumerate(U):
+        f = {k: T3[k] * (1 + 0.1 * i) for k in C.TOLERANCES}
+        rec = {**f, **C.compare(f, T3)} if i < 3 else _stopped_record(f, T3)
+        rec.update(index=i)
+        sets.append((space.values(u), rec))
+    # 3 exact sets of 5 needed: the two stopped sets of least score (3 and 4) run on
+    assert C.short_figures(space, [r for _, r in sets]) == ["peak_q", "eps1_95", "dilatancy"]
+    assert C.to_complete(space, sets) == [sets[3][0], sets[4][0]]
+    # one more exact set: one
+    exact = lambda i: {**(f := {k: T3[k] * (1 + 0.1 * i) for k in C.TOLERANCES}),
+                       **C.compare(f, T3), "index": i}
+    sets[5] = (sets[5][0], exact(5))
+    assert C.to_complete(space, sets) == [sets[3][0]]
+    # a set outside the box counts for nothing
+    assert C.to_complete(space, [((1e20, 30.0, 0.1), sets[0][1])] + sets[1:]) == [
+        sets[3][0], sets[4][0]]
+    assert C.to_complete(space, [(v, exact(r["index"])) for v, r in sets]) == []
+    # the model waits for them: None while short, then fitted on the censored values
+    assert C.model_of(space, sets, T3) is None
+    m = C.model_of(space, [(v, exact(i) if i in (3, 4) else r)
+                           for i, (v, r) in enumerate(sets)], T3)
+    assert m is not None and m.smoothing and np.isnan(m.Y[6:, 3]).all()
+
+
+def test_search_with_runs_stopped_once_decided_meets_the_targets_and_completes_the_fewest():
+    """The trap's figures (``_trap``) with a steep secant: a first run whose secant alone
+    decides (``first_run_decides`` at four seeds, 2000 disks) stops at 0.25 % (its record
+    ``_stopped_record``); before each model the search runs on the stopped sets the model
+    needs, no more; it still ends in the optimum's basin with every target met, with sets left
+    stopped (the runs saved), and the same sets twice."""
+    us = np.array([0.6, 0.3, 0.6])
+    figs0, _ = _trap(us, 1.0 - us, W=0.08)
+    space = _space3()
+
+    def figs(u):
+        return {**figs0(u), "secant": T3["secant"] * math.exp(4.0 * (u[0] - us[0]))}
+
+    def search():
+        log, completed = [], []
+        seen_now = {}
+
+        def evaluate(points, stage):
+            out = []
+            for v in points:
+                f = figs(np.asarray(space.u_of(v)))
+                err = {k: f[k] / T3[k] - 1 for k in C.TOLERANCES}
+                stop = stage != "start" and "secant" in C.first_run_decides(err, 4, 2000)
+                rec = _stopped_record(f, T3) if stop else {**C.compare(f, T3), **f}
+                rec.update(index=len(log), values=list(v))
+                log.append((stage, v, stop))
+                seen_now[v] = rec
+                out.append(rec)
+            return out
+
+        def complete(points, stage):
+            recs = [r for _, r in seen_now.items()]
+            short = C.short_figures(space, recs)
+            need = max(space_min - sum(k not in (r.get("censored") or {}) for r in recs)
+                       for k in short)
+            assert len(points) == need            # the fewest: each stopped set lacks all three
+            out = []
+            for v in points:
+                assert seen_now[v].get("censored")
+                f = figs(np.asarray(space.u_of(v)))
+                rec = {**C.compare(f, T3), **f, "index": seen_now[v]["index"], "values": list(v)}
+                seen_now[v] = rec
+                completed.append((stage, v))
+                out.append(rec)
+            return out
+
+        res = C.surrogate_search(space, evaluate, T3, start=space.values(1.0 - us),
+                                 max_evals=60, complete=complete)
+        return res, log, completed
+
+    space_min = C.space_dim_min(space)
+    (best, seen, trace, why, info), log, completed = search()
+    assert why == "targets met" and best["met"]
+    ub = np.array(space.u_of(tuple(best["values"])))
+    assert np.linalg.norm(ub - us) < 0.25
+    stopped = [v for _, v, s in log if s]
+    assert completed and len(completed) < len(stopped)
+    assert any(r.get("censored") for r in seen.values())          # runs left stopped
+    assert [t["stage"] for t in trace if t["stage"].startswith("complete")]
+    assert search()[1:] == (log, completed)
+
+
+STOP_CALLS = []
+
+
+def _stopping_task(a):
+    """``_synthetic_task`` stopped as ``_evaluate_task`` stops a run given a["stop"]: its curve
+    cut at the record where ``InRunDecision`` decides, with what the records fix; given no stop,
+    the whole curve (a stopped run run on: the rows of one never stopped)."""
+    res = _synthetic_task(a)
+    STOP_CALLS.append((a["key"], a["stop"] is not None, a["resume"]))
+    rule = a["stop"]
+    if rule is not None:
+        d = C.InRunDecision(rule["target"], rule["n_seeds"], a["params"]["n"], rule["smooth"])
+        c = res["curve"]
+        for e, q in zip(c["eps1"], c["q"]):
+            if d.add(e, q) is not None:
+                i = d.decided["index"]
+                res["curve"] = {k: v[:i + 1] for k, v in c.items()}
+                res["stopped"] = {**d.decided, "known": d.known()}
+                break
+    return res
+
+
+def test_calibration_with_stop_decided_runs_stops_first_runs_and_completes_what_the_model_needs(
+        tmp_path):
+    """``stop_decided_runs`` on the synthetic 2000-disk calibration: the start set runs whole;
+    design sets whose first run decides stop there (calibration.csv: stopped_at, the figures
+    known from below or not at all, one run), among them those the model needs run on to the
+    end (the same run: resumed, same key); the search meets the targets, the same set as
+    without the stop or another that meets them; the runs and task calls counted; the report
+    says so; a --resume runs nothing."""
+    STOP_CALLS.clear()
+    s = _far_and_near(tmp_path / "stop", stop_decided_runs=True, task=_stopping_task, initial=6)
+    rows = [r for r in _csv(tmp_path / "stop" / "calibration.csv") if r["kind"] == "dem"]
+    assert rows[0]["stage"] == "start" and rows[0]["censored"] == ""
+    assert not STOP_CALLS[0][1]                              # the start set: no stop
+    stopped = [r for r in rows if r["censored"]]
+    assert stopped and all(r["runs"] == "1" and r["decided_by"] and float(r["stopped_at"]) > 0
+                           for r in stopped)
+    for r in stopped:
+        assert "dilatancy unknown" in r["censored"]
+        assert r["decided_by"] == "secant" or "peak_q" in r["decided_by"]
+    sr = s["seed_rule"]
+    assert sr["stop_decided_runs"] and sr["sets_stopped"] == len(stopped)
+    assert sr["runs_stopped"] == len(stopped) + sr["runs_completed"] > len(stopped)
+    # the completed: run again without the stop, resumed, under the key of the stopped run
+    stops = [k for k, st, _ in STOP_CALLS if st]
+    again = [(k, res) for k, st, res in STOP_CALLS if not st and k in stops]
+    assert len(again) == sr["runs_completed"] and all(res for _, res in again)
+    # a completed set stays decided on its one run, now with every figure
+    assert sum(not r["censored"] and r["runs"] == "1" for r in rows) >= sr["runs_completed"]
+    assert s["met"] and s["check_met"] is not None
+    assert s["runs"] == len(STOP_CALLS) - sr["runs_completed"] == CALLS["n"] - sr["runs_completed"]
+    C.redraw_figures(str(tmp_path / "stop"))             # from the files, censored sets and all
+    rep = (tmp_path / "stop" / "report.md").read_text()
+    assert "stopped, then run on to its end (complete1)" in rep
+    assert f"{sr['runs_stopped']} runs stopped, {sr['runs_completed']} of them" in rep
+    # the same search without the stop: its best set meets the targets too
+    ref = _far_and_near(tmp_path / "ref", initial=6)
+    assert ref["met"] and s["met"] and ref["runs"] > s["runs"] - len(stopped)
+    before = (tmp_path / "stop" / "evaluations.jsonl").read_text()
+    STOP_CALLS.clear()
+    _far_and_near(tmp_path / "stop", stop_decided_runs=True, task=_stopping_task, initial=6,
+                  resume=True)
+    assert STOP_CALLS == [] and (tmp_path / "stop" / "evaluations.jsonl").read_text() == before
+
+
+def test_cli_stop_decided_runs_on_100_disks_stops_keeps_and_runs_on_bit_for_bit(tmp_path, capsys):
+    """--stop-decided-runs on the real DEM (TINY): the design's soft set (its secant -77 %)
+    stops at the secant strain; its folder keeps the run's checkpoint; the search's best set,
+    also stopped, is run on to its end for the seeds' mean: that run's curve is the curve of the
+    same run never stopped, bit for bit; evaluations.jsonl holds the stopped and the whole run;
+    --resume runs nothing and rewrites the file as it was."""
+    from dem.__main__ import main
+    out = tmp_path / "cal"
+    main(["calibrate", "--out", str(out), "--stop-decided-runs"] + TINY)
+    cap = capsys.readouterr()
+    assert "a first run stops once its records decide" in cap.err
+    rows = [r for r in _csv(out / "calibration.csv") if r["kind"] == "dem"]
+    cut = [r for r in rows if r["censored"]]
+    assert cut and all(r["runs"] == "1" and "secant" in r["decided_by"]
+                       and 0.0025 <= float(r["stopped_at"]) < 0.0027
+                       and r["censored"] == "peak_q at least, eps1_95 at least, dilatancy unknown"
+                       for r in cut)
+    assert rows[0]["censored"] == ""                     # the start set runs whole
+    lines = [json.loads(x) for x in (out / "evaluations.jsonl").read_text().splitlines()[1:]]
+    stopped = {r["key"]: r for r in lines if r.get("stopped")}
+    whole = {r["key"]: r for r in lines if not r.get("stopped")}
+    for r in cut:                                         # left stopped: its folder kept
+        key = next(k for k, x in stopped.items()
+                   if x["params"]["kn_over_d"] == float(r["kn_over_d"]))
+        assert (out / "work" / key / "checkpoint.npz").exists() and key not in whole
+    s = json.loads((out / "summary.json").read_text())
+    on = [k for k in stopped if k in whole]               # stopped, then run on
+    assert len(on) == s["seed_rule"]["runs_completed"] >= 1
+    a = whole[on[0]]
+    ref = C.evaluation._evaluate_task({
+        "key": a["key"], "params": a["params"], "rate": 0.05, "confining": 200e3,
+        "eps_max": 0.02, "post_peak_strain": 0.005, "work_dir": str(tmp_path / "ref"),
+        "resume": False, "stop": None})
+    assert ref["curve"] == a["curve"] and ref["steps"] == a["steps"]
+    assert stopped[on[0]]["curve"]["q"] == a["curve"]["q"][:len(stopped[on[0]]["curve"]["q"])]
+    before = (out / "evaluations.jsonl").read_text()
+    main(["calibrate", "--out", str(out), "--resume", "--stop-decided-runs"] + TINY)
+    cap = capsys.readouterr()
+    assert "(0 run now," in cap.out and (out / "evaluations.jsonl").read_text() == before

@@ -47,6 +47,39 @@ def test_biaxial_resume_equals_uninterrupted(tmp_path, monkeypatch):
     assert not (tmp_path / "b" / "candidates").exists()
 
 
+def test_biaxial_stopped_by_its_stop_function_then_resumed_equals_uninterrupted(tmp_path):
+    # the calibration's in-run stop: a run stopped at a row that is no checkpoint's (17, the
+    # checkpoints every 10) writes its checkpoint there and returns what ``stop`` said; resumed
+    # without ``stop``, it ends on the rows of the run never stopped, bit for bit
+    kw = dict(rate=0.5, eps_max=0.004, record_strain=1e-4, checkpoint_every=10,
+              verbose=False, figures=False, vtk=False, eta_a=5.0)
+    p = DemParams(n=100, seed=3)
+    ref = experiment.run_biaxial(p, tmp_path / "a", **kw)
+    seen = []
+
+    def stop(rows):
+        seen.append(len(rows))
+        return {"at": len(rows)} if len(rows) == 17 else None      # rows[0]: the start
+
+    cut = experiment.run_biaxial(p, tmp_path / "b", stop=stop, **kw)
+    assert cut.stopped == {"at": 17} and len(cut.rows) == 17 and seen == list(range(2, 18))
+    assert cut.rows == ref.rows[:17] and cut.state_a_path is None
+    assert (tmp_path / "b" / "checkpoint.npz").exists()
+    assert not (tmp_path / "b" / "summary.json").exists()
+    _, rows_b = io.read_csv(tmp_path / "b" / "biaxial.csv")
+    assert len(rows_b) == 17
+    res = experiment.run_biaxial(p, tmp_path / "b", resume=True, **kw)
+    assert res.stopped is None and res.rows == ref.rows
+    assert res.wall_time >= cut.wall_time          # the stopped part's time counted
+    _, rows_a = io.read_csv(tmp_path / "a" / "biaxial.csv")
+    _, rows_b = io.read_csv(tmp_path / "b" / "biaxial.csv")
+    assert rows_a == rows_b
+    assert not (tmp_path / "b" / "checkpoint.npz").exists()
+    # a stop function that never stops leaves the run as it is
+    never = experiment.run_biaxial(p, tmp_path / "c", stop=lambda rows: None, **kw)
+    assert never.stopped is None and never.rows == ref.rows
+
+
 def test_crosscheck_dem_part_resumes_what_an_interrupted_run_finished(tmp_path, monkeypatch):
     # A cross-check interrupted during its probes: the rerun with resume=True takes the
     # finished biaxial test, the relaxed reference and the probe runs from disk, runs only

@@ -854,6 +854,28 @@ def test_dask_cluster_gives_the_same_evaluations_as_local_runs(tmp_path):
     assert not (tmp_path / "dask" / "work").exists()
 
 
+def test_dask_cluster_runs_a_stopped_set_on_from_its_start_to_the_same_bits(tmp_path):
+    """--stop-decided-runs on a dask cluster, where no run's folder is kept: a stopped set that
+    the search runs on is run again from its start (not from a checkpoint), to the same rows as a
+    local run resumed from its checkpoint: the same calibration.csv, curves.csv and summary's
+    counts as in this process (the real DEM, 100 disks, TINY's options)."""
+    distributed = pytest.importorskip("distributed")
+    kw = dict(vary=("kn_over_d",), initial=3, max_evals=5, rate=0.05, eps_max=0.02,
+              post_peak_strain=0.005, verbose=False, seeds=(1, 2), check_seeds=(3,),
+              stop_decided_runs=True)
+    base = DemParams(n=100)
+    a = C.run_calibration(str(tmp_path / "local"), base, workers=1, **kw)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        b = C.run_calibration(str(tmp_path / "dask"), base, scheduler=cluster.scheduler_address,
+                              **kw)
+    assert a["seed_rule"]["runs_completed"] >= 1 and a["seed_rule"] == b["seed_rule"]
+    strip = lambda t: [r for r in _csv(t) if r.pop("wall_time") is not None]
+    assert strip(tmp_path / "local" / "calibration.csv") == strip(tmp_path / "dask" / "calibration.csv")
+    assert (tmp_path / "local" / "curves.csv").read_text() == (tmp_path / "dask" / "curves.csv").read_text()
+    assert not (tmp_path / "dask" / "work").exists()
+
+
 def test_sigterm_is_one_line_and_resume_keeps_the_finished_evaluations(tmp_path, capsys):
     import signal
     from tests._interrupt import interrupt_after

@@ -201,7 +201,7 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
                                       eps_v=res["curve"]["eps_v"])
                     r.update(compare(r, hfig))
                     what = _fmt_figs(r)
-                _say(True, f"[calibrate] {stage} set {set_index(points[i])}, seed {s} "
+                _say(True, f"[calibrate] {stage} set {set_index(points[i], i)}, seed {s} "
                            f"({counts['run']} runs so far, at most {max_evals} sets): "
                            f"{_fmt_values(space.names, points[i])}: {what}; run "
                            f"{res['wall_time']:.0f} s, elapsed {time.time() - t0:.0f} s")
@@ -216,12 +216,11 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         _map(tasks, collect, workers, scheduler, fn=task)
         return got
 
-    def set_index(v):
-        """The index of the set of values v: its record's, or where the batch puts it."""
+    def set_index(v, i):
+        """The index of the set of values v, the i-th of its batch: its record's, or where the
+        batch puts it."""
         return next((r["index"] for r in records if tuple(r["values"]) == tuple(v)),
-                    len(records) + pending.index(tuple(v)))
-
-    pending = []        # the sets of the batch being run, in order
+                    len(records) + i)
 
     def first_run(res):
         """The figures a set's first run decides as missed by its seeds' mean (none with
@@ -237,22 +236,31 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         return first_run_decides({k: err["err_" + k] for k in TOLERANCES}, len(seeds),
                                  base.n)
 
-    def evaluate(points, stage):
-        # every set on its first seed; the rest of the seeds only where that run leaves the
-        # set's mean undecided
-        pending[:] = [tuple(v) for v in points]
+    def on_seeds(points, stage, stop=False):
+        """Every set of points on its first seed (``stop``: a run stops once decided), then on
+        the other seeds where that run leaves the set's mean undecided (on every seed at once
+        with --no-first-run-decision): (runs {(i, seed): result}, {i: figures decided})."""
         if not o.decide_on_first_run:
             got = run_sets(points, stage, seeds)    # one batch: every run at once
-        else:     # the start set runs whole: the report shows its curve beside the best's
-            got = run_sets(points, stage, seeds[:1], stop=stops and stage != "start")
+        else:
+            got = run_sets(points, stage, seeds[:1], stop=stop)
         decided = {i: first_run(got[(i, seeds[0])]) for i in range(len(points))}
         rest = [i for i in range(len(points)) if not decided[i]]
         if len(seeds) > 1 and rest:
             got.update(run_sets(points, stage, seeds[1:], which=set(rest)))
+        return got, decided
+
+    def combined(got, i, decided):
+        """The record of set i from its runs ``got``: its first seed's alone where decided."""
+        used = seeds[:1] if decided else seeds
+        return _combine([got[(i, s)] for s in used], used, smooth, post_peak_strain, hfig)
+
+    def evaluate(points, stage):
+        # the start set runs whole: the report shows its curve beside the best's
+        got, decided = on_seeds(points, stage, stop=stops and stage != "start")
         out = []
         for i, v in enumerate(points):
-            used = seeds[:1] if decided[i] else seeds
-            rec = _combine([got[(i, s)] for s in used], used, smooth, post_peak_strain, hfig)
+            rec = combined(got, i, decided[i])
             rec.update(index=len(records), stage=stage, values=list(v), decided_by=decided[i])
             assert not (decided[i] and rec["met"])    # a decided figure misses its tolerance
             records.append(rec)
@@ -273,20 +281,13 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
         checkpoint: the rows of a run never stopped) and, where the whole run no longer
         decides (never seen: what a stop decides stays decided), on the other seeds; each
         record replaced in place."""
-        pending[:] = [tuple(v) for v in points]
-        got = run_sets(points, stage, seeds[:1])
+        got, decided = on_seeds(points, stage)
         out = []
         for i, v in enumerate(points):
             old = next(r for r in records if tuple(r["values"]) == tuple(v))
-            decided = first_run(got[(i, seeds[0])])
-            runs = {seeds[0]: got[(i, seeds[0])]}
-            if not decided:
-                more = run_sets([v], stage, seeds[1:])
-                runs.update({s: more[(0, s)] for s in seeds[1:]})
-            used = seeds[:1] if decided else seeds
-            rec = _combine([runs[s] for s in used], used, smooth, post_peak_strain, hfig)
+            rec = combined(got, i, decided[i])
             rec.update(index=old["index"], stage=old["stage"], values=old["values"],
-                       decided_by=decided, run_on=stage)
+                       decided_by=decided[i], run_on=stage)
             records[old["index"]] = rec
             out.append(rec)
             _say(verbose, f"[calibrate] set {rec['index']} ({old['stage']}) run on to its end "

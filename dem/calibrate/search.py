@@ -350,9 +350,14 @@ def model_of(space: Space, sets, target, names=None):
 def short_figures(space: Space, records, names=None):
     """The figures known exactly on fewer than ``model_sets_min`` of ``records`` (those inside
     the box): what the model lacks."""
-    need = space_dim_min(space)
-    return [f for f in (tuple(TOLERANCES) if names is None else names)
-            if sum(f not in (r.get("censored") or {}) for r in records) < need]
+    have = _exact_counts(records, names)
+    return [f for f, n in have.items() if n < space_dim_min(space)]
+
+
+def _exact_counts(records, names=None):
+    """{figure: on how many of ``records`` it is known exactly (not in their "censored")}."""
+    return {f: sum(f not in (r.get("censored") or {}) for r in records)
+            for f in (tuple(TOLERANCES) if names is None else names)}
 
 
 def to_complete(space: Space, sets):
@@ -362,7 +367,7 @@ def to_complete(space: Space, sets):
     still short."""
     inside = [(v, r) for v, r in sets if space.u_of(tuple(v)) is not None]
     need = space_dim_min(space)
-    have = {f: sum(f not in (r.get("censored") or {}) for _, r in inside) for f in TOLERANCES}
+    have = _exact_counts([r for _, r in inside])
     out = []
     for v, r in sorted((p for p in inside if p[1].get("censored")), key=lambda p: rank(p[1])):
         if any(have[f] < need for f in r["censored"]):

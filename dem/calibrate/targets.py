@@ -90,6 +90,7 @@ class InRunDecision:
         self.k_done = 0            # records whose smoothed q is final
         self.best = -math.inf      # the largest of those
         self.sec = None            # the secant modulus, once past SECANT_STRAIN
+        self._qs = None            # the final smoothed values (the first k_done)
         self.decided = None
 
     def add(self, eps1, q):
@@ -128,7 +129,7 @@ class InRunDecision:
     def known(self) -> dict:
         """What the records so far fix: {"secant": value} once past SECANT_STRAIN, and
         {"peak_q": ("at least", bound), "eps1_95": ("at least", bound)} once a smoothed value is
-        final; the dilatancy ratio never (``censored_figures``)."""
+        final; the dilatancy ratio never (``stopped_figures``)."""
         out = {}
         if self.sec is not None:
             out["secant"] = self.sec

@@ -246,7 +246,7 @@ def run_calibration(out_dir, base: DemParams, vary=None, bounds=_D.bounds, targe
             got = run_sets(points, stage, seeds[:1], stop=stop)
         decided = {i: first_run(got[(i, seeds[0])]) for i in range(len(points))}
         rest = [i for i in range(len(points)) if not decided[i]]
-        if len(seeds) > 1 and rest:
+        if len(seeds) > 1 and rest and o.decide_on_first_run:
             got.update(run_sets(points, stage, seeds[1:], which=set(rest)))
         return got, decided
 

@@ -1037,6 +1037,7 @@ def test_a_far_off_set_runs_on_one_seed_a_near_one_on_all(tmp_path):
     rows_e = [r for r in _csv(tmp_path / "every" / "calibration.csv") if r["kind"] == "dem"]
     assert all(int(r["runs"]) == 4 and r["decided_by"] == "" for r in rows_e)
     assert e["runs"] == CALLS["n"] == 4 * len(rows_e) + 1
+    assert e["taken_from_checkpoint"] == 0 == s["taken_from_checkpoint"]   # nothing resumed
     assert e["seed_rule"]["runs_saved"] == 0 and "(--no-first-run-decision)" in (
         tmp_path / "every" / "report.md").read_text()
     # the synthetic DEM has no scatter: the same search, the same best set
